@@ -1,0 +1,1 @@
+"""The shared FMI layer: variable tables, the model contract and the pythonfmu glue."""

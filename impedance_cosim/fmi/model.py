@@ -1,0 +1,72 @@
+"""The contract between a model's plain numeric code and the shared FMI layer.
+
+A model is a class with a variable table and four operations (build from parameters, step,
+outputs, state). It knows nothing about FMI; impedance_cosim.fmi.slave wraps any such class into a
+pythonfmu slave, and tests drive the class directly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, ClassVar, TypeVar
+
+from impedance_cosim.fmi.variables import Variable
+
+P = TypeVar("P")
+
+
+class ModelError(ValueError):
+    """Bad parameter, bad input or failed step; the message names the problem for the FMI log."""
+
+
+class FmuModel:
+    """Base class of the models packaged as FMUs (see module docstring)."""
+
+    MODEL_NAME: ClassVar[str]
+    DESCRIPTION: ClassVar[str]
+    DEFAULT_EXPERIMENT: ClassVar[dict[str, float]] = {
+        "startTime": 0.0,
+        "stopTime": 20.0,
+        "stepSize": 1 / 400,
+    }
+    # "" when no output depends directly on an input at a communication point; None otherwise.
+    OUTPUT_DEPENDENCIES: ClassVar[str | None] = None
+
+    @classmethod
+    def variables(cls) -> list[Variable]:
+        """The variable table: order defines value references."""
+        raise NotImplementedError
+
+    def __init__(self, parameters: dict[str, Any], start_time: float, inputs: tuple) -> None:
+        """Validate the parameters (raise ModelError naming the bad one) and compute the
+        initial outputs from them and the inputs."""
+        raise NotImplementedError
+
+    def do_step(self, t: float, h: float, inputs: tuple) -> None:
+        """Advance from t to t + h with the given inputs; raise ModelError if that is impossible."""
+        raise NotImplementedError
+
+    def outputs(self) -> tuple:
+        """Current output values, in the order of the table's outputs."""
+        raise NotImplementedError
+
+    def get_state(self) -> dict[str, Any]:
+        """Every bit of internal state as fresh JSON-compatible data (floats round-trip exactly)."""
+        raise NotImplementedError
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a state from get_state (possibly after a JSON round trip: lists for tuples)."""
+        raise NotImplementedError
+
+
+def build_params(cls: type[P], values: dict[str, Any]) -> P:
+    """Instantiate a parameter dataclass from the matching entries of a name -> value dict."""
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    return cls(**{k: v for k, v in values.items() if k in names})
+
+
+def check_finite_inputs(names: tuple[str, ...], values: tuple) -> None:
+    """Raise ModelError naming the first non-finite input."""
+    for name, v in zip(names, values):
+        if not (v - v == 0.0):  # false for NaN and +-inf
+            raise ModelError(f"input {name} is not finite ({v})")

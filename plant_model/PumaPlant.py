@@ -1,0 +1,12 @@
+"""pythonfmu slave script of the plant FMU: a thin shell over plant_model.model.PlantModel."""
+
+from pythonfmu import Fmi2Slave
+
+from impedance_cosim.fmi.slave import ModelSlave
+from plant_model.model import PlantModel
+
+
+class PumaPlant(ModelSlave, Fmi2Slave):
+    """PUMA-560 subset arm against a stiff wall (see PlantModel)."""
+
+    model_class = PlantModel

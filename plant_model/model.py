@@ -1,0 +1,220 @@
+"""The plant: the PUMA-subset arm touching the wall, with its joint and wrist sensors.
+
+Plain numeric code behind the PumaPlant FMU. State: joint angles and velocities, the contact
+mode, the integrator's step-size guess and the sensor-noise generator. Each do_step integrates
+eq. (1) with the torque held constant, using adaptive Dormand-Prince 5(4) and stopping exactly
+where the contact closes or opens, so the result does not depend on the communication step.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from typing import Any
+
+from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
+from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
+from impedance_cosim.fmi.variables import Variable, parameters_of, vector
+from impedance_cosim.ode import IntegrationError, integrate
+from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
+
+
+@dataclass(frozen=True)
+class PlantSetup:
+    """Initial condition, sensor model and integrator settings of the plant."""
+
+    x0: float = _p(0.3, "m", "Initial end-effector x (arm at rest)")
+    y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
+    phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
+    elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
+    q_quant: float = _p(0.0, "rad", "Joint encoder resolution (0: no quantization)", 0.0)
+    q_noise: float = _p(0.0, "rad", "Std. dev. of Gaussian joint-angle noise (0: none)", 0.0)
+    noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
+    rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
+    atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)
+
+    def validate(self) -> None:
+        """Raise ValueError naming a bad setting."""
+        check_fields(self)
+
+
+INPUTS = ("tau1", "tau2", "tau3")
+H0 = 1e-3  # s, the integrator's first step guess
+
+
+class PlantModel(FmuModel):
+    """Arm + wall + sensors (see module docstring)."""
+
+    MODEL_NAME = "PumaPlant"
+    DESCRIPTION = (
+        "3-DOF planar PUMA-560 subset against a stiff frictionless wall (Impedance Control"
+        " Without Using Velocity Measurements, section 5): joint torques in; joint angles and"
+        " wrist force/torque out, plus truth signals for analysis"
+    )
+    OUTPUT_DEPENDENCIES = ""  # outputs depend on the state only: no direct feedthrough
+
+    @classmethod
+    def variables(cls) -> list[Variable]:
+        return [
+            *parameters_of(ArmParams()),
+            *parameters_of(WallParams()),
+            *parameters_of(PlantSetup()),
+            *vector(list(INPUTS), "input", "N.m", "Joint {i} motor torque"),
+            *vector(["q1", "q2", "q3"], "output", "rad", "Joint {i} angle, measured (encoder)"),
+            Variable("fx", "output", 0.0, "Wrist F/T sensor: force on the environment, x", "N"),
+            Variable("fy", "output", 0.0, "Wrist F/T sensor: force on the environment, y", "N"),
+            Variable("n", "output", 0.0, "Wrist F/T sensor: moment about the tool point", "N.m"),
+            *vector(["q1_true", "q2_true", "q3_true"], "output", "rad", "Joint {i} angle, truth"),
+            *vector(["qd1", "qd2", "qd3"], "output", "rad/s", "Joint {i} velocity, truth"),
+            Variable("x", "output", 0.0, "End-effector x, truth", "m"),
+            Variable("y", "output", 0.0, "End-effector y, truth", "m"),
+            Variable("phi", "output", 0.0, "End-effector orientation, truth", "rad"),
+            Variable("xd", "output", 0.0, "End-effector x velocity, truth", "m/s"),
+            Variable("yd", "output", 0.0, "End-effector y velocity, truth", "m/s"),
+            Variable("phid", "output", 0.0, "End-effector angular velocity, truth", "rad/s"),
+            Variable("contact_force", "output", 0.0, "Normal force on the wall (>= 0)", "N"),
+            Variable("penetration", "output", 0.0, "Depth of the tool point in the wall", "m"),
+        ]
+
+    def __init__(self, parameters: dict[str, Any], start_time: float = 0.0, inputs=None) -> None:
+        try:
+            self.arm = Arm(build_params(ArmParams, parameters))
+            self.wall = build_params(WallParams, parameters)
+            self.wall.validate()
+            self.setup = build_params(PlantSetup, parameters)
+            self.setup.validate()
+            s = self.setup
+            q = self.arm.inverse_kinematics((s.x0, s.y0, s.phi0), s.elbow_up)
+        except UnreachablePoseError as exc:
+            raise ModelError(f"initial pose: {exc}") from None
+        except ValueError as exc:
+            raise ModelError(str(exc)) from None
+        if abs(self.arm.jacobian_det(q)) < 1e-9:
+            raise ModelError(f"initial pose ({s.x0}, {s.y0}, {s.phi0}) is a kinematic singularity")
+        self.t = float(start_time)
+        self.q = q
+        self.qd = (0.0, 0.0, 0.0)
+        x, xd = self._ee_x(q, self.qd)
+        self.in_contact = contact_event(self.wall, x, xd, False) > 0.0
+        self.h = H0
+        self.rng = random.Random(s.noise_seed)
+        self.q_meas = self._measure(q)
+
+    # --- equations ----------------------------------------------------------------------------
+
+    def _ee_x(self, q, qd) -> tuple[float, float]:
+        """End-effector x and x-velocity (all the wall needs)."""
+        a = self.arm.params
+        q12 = q[0] + q[1]
+        q123 = q12 + q[2]
+        s1, s12, s123 = a.a1 * math.sin(q[0]), a.a2 * math.sin(q12), a.a3 * math.sin(q123)
+        x = a.a1 * math.cos(q[0]) + a.a2 * math.cos(q12) + a.a3 * math.cos(q123)
+        xd = -(s1 + s12 + s123) * qd[0] - (s12 + s123) * qd[1] - s123 * qd[2]
+        return x, xd
+
+    def _rhs(self, tau, in_contact: bool):
+        """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1)."""
+        arm, wall = self.arm, self.wall
+
+        def f(y):
+            q, qd = y[:3], y[3:]
+            if in_contact:
+                x, xd = self._ee_x(q, qd)
+                fx = contact_force_law(wall, x, xd)
+                j = arm.jacobian(q)[0]  # J^T (fx, 0, 0) = fx * first row of J
+                net = (tau[0] - fx * j[0], tau[1] - fx * j[1], tau[2] - fx * j[2])
+            else:
+                net = tau
+            qdd = arm.forward_dynamics(q, qd, net)
+            return (qd[0], qd[1], qd[2], qdd[0], qdd[1], qdd[2])
+
+        return f
+
+    def _event(self, in_contact: bool):
+        wall = self.wall
+
+        def g(y):
+            x, xd = self._ee_x(y[:3], y[3:])
+            return contact_event(wall, x, xd, in_contact)
+
+        return g
+
+    def _measure(self, q) -> tuple[float, float, float]:
+        """Joint encoders: truth + Gaussian noise, then quantized to the resolution."""
+        s = self.setup
+        out = []
+        for qi in q:
+            if s.q_noise > 0.0:
+                qi += self.rng.gauss(0.0, s.q_noise)
+            if s.q_quant > 0.0:
+                qi = round(qi / s.q_quant) * s.q_quant
+            out.append(qi)
+        return (out[0], out[1], out[2])
+
+    # --- FmuModel -------------------------------------------------------------------------------
+
+    def do_step(self, t: float, h: float, inputs: tuple) -> None:
+        check_finite_inputs(INPUTS, inputs)
+        if not h > 0.0:
+            raise ModelError(f"communication step must be > 0 (got {h})")
+        if abs(t - self.t) > 1e-9 * max(1.0, abs(t)):
+            raise ModelError(f"doStep at t={t}, but the plant is at t={self.t}")
+        t_end = t + h
+        y = (*self.q, *self.qd)
+        t_cur, mode, hh, switches = t, self.in_contact, self.h, 0
+        try:
+            while True:
+                t_cur, y, hh, hit = integrate(
+                    self._rhs(inputs, mode), t_cur, y, t_end, hh,
+                    self.setup.rtol, self.setup.atol, self._event(mode),
+                )  # fmt: skip
+                if not hit:
+                    break
+                mode, switches = not mode, switches + 1
+                if switches > 1000:
+                    raise IntegrationError("contact chattering: more than 1000 switches in a step")
+        except (IntegrationError, ZeroDivisionError, OverflowError) as exc:
+            raise ModelError(f"plant integration failed: {exc}") from None
+        self.t, self.q, self.qd = t_end, y[:3], y[3:]
+        self.in_contact, self.h = mode, hh
+        self.q_meas = self._measure(self.q)
+
+    def outputs(self) -> tuple:
+        q, qd = self.q, self.qd
+        pose = self.arm.kinematics(q)
+        j = self.arm.jacobian(q)
+        xdot = tuple(j[r][0] * qd[0] + j[r][1] * qd[1] + j[r][2] * qd[2] for r in range(3))
+        fx = wall_force(self.wall, pose[0], xdot[0])
+        pen = max(0.0, pose[0] - self.wall.wall_x)
+        return (*self.q_meas, fx, 0.0, 0.0, *q, *qd, *pose, *xdot, fx, pen)
+
+    def get_state(self) -> dict[str, Any]:
+        version, internal, gauss_next = self.rng.getstate()
+        return {
+            "t": self.t,
+            "q": list(self.q),
+            "qd": list(self.qd),
+            "in_contact": self.in_contact,
+            "h": self.h,
+            "q_meas": list(self.q_meas),
+            "rng": [version, list(internal), gauss_next],
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.t = state["t"]
+        self.q = tuple(state["q"])
+        self.qd = tuple(state["qd"])
+        self.in_contact = state["in_contact"]
+        self.h = state["h"]
+        self.q_meas = tuple(state["q_meas"])
+        version, internal, gauss_next = state["rng"]
+        self.rng.setstate((version, tuple(internal), gauss_next))
+
+    # --- analysis helpers -------------------------------------------------------------------
+
+    def energy(self) -> float:
+        """Total mechanical energy T + V (+ wall spring energy while penetrated)."""
+        pen = max(0.0, self.arm.kinematics(self.q)[0] - self.wall.wall_x)
+        spring = 0.5 * self.wall.wall_k * pen * pen
+        return self.arm.kinetic_energy(self.q, self.qd) + self.arm.potential_energy(self.q) + spring

@@ -41,6 +41,12 @@ class FmuSpec:
 
 FMUS = {
     "plant": FmuSpec("plant", "plant_model", "PumaPlant.py", "plant_model.model.PlantModel"),
+    "controller": FmuSpec(
+        "controller",
+        "controller_model",
+        "ImpedanceController.py",
+        "controller_model.model.ControllerModel",
+    ),
 }
 
 

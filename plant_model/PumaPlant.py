@@ -2,8 +2,10 @@
 
 from pythonfmu import Fmi2Slave
 
-from impedance_cosim.fmi.slave import ModelSlave
+from impedance_cosim.fmi.slave import ModelSlave, hold_slave_module
 from plant_model.model import PlantModel
+
+hold_slave_module(__name__)
 
 
 class PumaPlant(ModelSlave, Fmi2Slave):

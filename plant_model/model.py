@@ -90,8 +90,6 @@ class PlantModel(FmuModel):
             raise ModelError(f"initial pose: {exc}") from None
         except ValueError as exc:
             raise ModelError(str(exc)) from None
-        if abs(self.arm.jacobian_det(q)) < 1e-9:
-            raise ModelError(f"initial pose ({s.x0}, {s.y0}, {s.phi0}) is a kinematic singularity")
         self.t = float(start_time)
         self.q = q
         self.qd = (0.0, 0.0, 0.0)

@@ -179,3 +179,14 @@ class ModelSlave:
         if self.model is None or params != old_params:
             self.model = self.model_class(params, self._start_time, self._input_values())
         self.model.set_state(state["model"])
+
+
+_HELD_NAMESPACES: list[Any] = []
+
+
+def hold_slave_module(name: str) -> None:
+    """Work around a pythonfmu 0.7.0 bug. Each fmi2Instantiate re-executes the slave script in its
+    module's namespace and then releases one reference too many to that namespace dict, so the
+    second instance in a process reads a freed dict (segfault, or "module has no attribute ''").
+    The slave script calls this at top level: one extra reference per execution balances it."""
+    _HELD_NAMESPACES.append(sys.modules[name].__dict__)

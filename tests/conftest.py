@@ -1,0 +1,46 @@
+"""Shared fixtures: FMUs built once per test session, and a contact scenario for the plant."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from impedance_cosim.build import FMUS, build_fmu
+from impedance_cosim.linalg3 import matvec
+from plant_model.model import PlantModel
+
+DT = 1 / 400
+
+
+@pytest.fixture(scope="session")
+def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """All FMUs, freshly built from this checkout."""
+    out = tmp_path_factory.mktemp("fmus")
+    for spec in FMUS.values():
+        build_fmu(spec, out)
+    return out
+
+
+def output_dict(model) -> dict[str, float]:
+    """A model's outputs by name."""
+    names = [v.name for v in model.variables() if v.causality == "output"]
+    return dict(zip(names, model.outputs(), strict=True))
+
+
+def contact_torques(seconds: float, parameters: dict | None = None) -> list[tuple]:
+    """Torques at 400 Hz of a computed-torque joint controller driving the arm into the wall
+    (target 5 cm inside) and out again, switching every 1.5 s: contact closes and opens."""
+    plant = PlantModel(parameters or {}, 0.0, None)
+    arm = plant.arm
+    targets = [arm.inverse_kinematics(p) for p in [(0.70, 0.0, 0.0), (0.55, 0.1, 0.0)]]
+    torques = []
+    for i in range(round(seconds / DT)):
+        qt = targets[int(i * DT / 1.5) % 2]
+        acc = tuple(100.0 * (qt[j] - plant.q[j]) - 20.0 * plant.qd[j] for j in range(3))
+        ha = matvec(arm.inertia(plant.q), acc)
+        grav = arm.gravity(plant.q)
+        tau = (grav[0] + ha[0], grav[1] + ha[1], grav[2] + ha[2])
+        torques.append(tau)
+        plant.do_step(i * DT, DT, tau)
+    return torques

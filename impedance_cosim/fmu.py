@@ -1,0 +1,216 @@
+"""One FMU instance driven through fmpy's FMU2Slave: names instead of value references, every
+status checked, every log message kept, state save/restore. The building block of the master
+(and of the tests that drive the FMUs by hand)."""
+
+from __future__ import annotations
+
+import ctypes
+from collections.abc import Iterable, Mapping
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
+
+STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+
+
+class FmuError(RuntimeError):
+    """An FMI call failed; the message carries the FMU's own log messages."""
+
+
+@cache
+def _unpacked(fmu: Path, mtime: float) -> tuple[Any, str]:
+    """Model description and extraction folder of an FMU (once per file version)."""
+    return read_model_description(str(fmu)), extract(str(fmu))
+
+
+class FmuInstance:
+    """An instantiated co-simulation FMU (see module docstring)."""
+
+    def __init__(self, fmu: str | Path, instance_name: str, logging_on: bool = True) -> None:
+        path = Path(fmu).resolve()
+        if not path.is_file():
+            raise FileNotFoundError(f"FMU {path} does not exist (run `impedance-cosim build`)")
+        self.path = path
+        self.name = instance_name
+        self.description, unzip_dir = _unpacked(path, path.stat().st_mtime)
+        if self.description.coSimulation is None:
+            raise FmuError(f"{path.name} is not a co-simulation FMU")
+        self.variables = {v.name: v for v in self.description.modelVariables}
+        self.messages: list[tuple[str, str, str]] = []  # (status, category, message)
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self.slave = FMU2Slave(
+            guid=self.description.guid,
+            unzipDirectory=unzip_dir,
+            modelIdentifier=self.description.coSimulation.modelIdentifier,
+            instanceName=instance_name,
+        )
+        self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
+        self._alive = True
+        self._do_step = self.slave._functions["fmi2DoStep"]  # raw ctypes: we check the status
+
+    # --- logging and status ---------------------------------------------------------------------
+
+    def _log(self, _env, _instance, status, category, message) -> None:
+        text = message.decode("utf-8", "replace") if message else ""
+        cat = category.decode("utf-8", "replace") if category else ""
+        self.messages.append((STATUS[status] if 0 <= status < 6 else str(status), cat, text))
+
+    def errors(self) -> list[str]:
+        """Messages logged with Error or Fatal status (what went wrong, in the FMU's words)."""
+        return [m for s, _, m in self.messages if s in ("Error", "Fatal")]
+
+    def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return getattr(self.slave, method)(*args, **kwargs)
+        except FMICallException as exc:
+            detail = "; ".join(self.errors()[-3:]) or "no message logged"
+            raise FmuError(f"{self.name}: {exc} ({detail})") from None
+        except Exception as exc:  # instantiate() raises a bare Exception
+            detail = "; ".join(self.errors()[-3:]) or "no message logged"
+            raise FmuError(f"{self.name}: {method} failed: {exc} ({detail})") from None
+
+    # --- variables ------------------------------------------------------------------------------
+
+    def vr(self, name: str) -> int:
+        """Value reference of a variable, with a clear error for an unknown name."""
+        try:
+            return self.variables[name].valueReference
+        except KeyError:
+            raise KeyError(f"{self.path.name} has no variable {name!r}") from None
+
+    def set(self, values: Mapping[str, Any]) -> None:
+        """Set variables by name, converting to each variable's FMI type."""
+        groups: dict[str, tuple[list[int], list[Any]]] = {}
+        for name, value in values.items():
+            var = self.variables.get(name)
+            if var is None:
+                raise KeyError(f"{self.path.name} has no variable {name!r}")
+            vrs, vals = groups.setdefault(var.type, ([], []))
+            vrs.append(var.valueReference)
+            vals.append(_convert(var.type, value, name))
+        for kind, (vrs, vals) in groups.items():
+            self._call(f"set{kind}", vrs, vals)
+
+    def get(self, names: Iterable[str]) -> list[Any]:
+        """Values of the named variables, in order."""
+        names = list(names)
+        out: list[Any] = [None] * len(names)
+        groups: dict[str, tuple[list[int], list[int]]] = {}
+        for i, name in enumerate(names):
+            var = self.variables.get(name)
+            if var is None:
+                raise KeyError(f"{self.path.name} has no variable {name!r}")
+            vrs, idx = groups.setdefault(var.type, ([], []))
+            vrs.append(var.valueReference)
+            idx.append(i)
+        for kind, (vrs, idx) in groups.items():
+            for i, v in zip(idx, self._call(f"get{kind}", vrs), strict=True):
+                out[i] = v.decode("utf-8") if isinstance(v, bytes) else v
+        return out
+
+    def real_getter(self, names: Iterable[str]):
+        """A fast reader of Real variables (preallocated ctypes arrays): returns a function that
+        returns the current values as a list."""
+        vrs = [self.vr(n) for n in names]
+        n = len(vrs)
+        vr_arr = (ctypes.c_uint * n)(*vrs)
+        val_arr = (ctypes.c_double * n)()
+        fn, comp = self.slave._functions["fmi2GetReal"], self.slave.component  # raw ctypes
+
+        def read() -> list[float]:
+            status = fn(comp, vr_arr, n, val_arr)
+            if status > 1:
+                raise FmuError(f"{self.name}: fmi2GetReal failed ({STATUS[status]})")
+            return list(val_arr)
+
+        return read
+
+    def real_setter(self, names: Iterable[str]):
+        """A fast writer of Real variables: returns a function taking a sequence of values."""
+        vrs = [self.vr(n) for n in names]
+        n = len(vrs)
+        vr_arr = (ctypes.c_uint * n)(*vrs)
+        val_arr = (ctypes.c_double * n)()
+        fn, comp = self.slave._functions["fmi2SetReal"], self.slave.component  # raw ctypes
+
+        def write(values) -> None:
+            val_arr[:] = values
+            status = fn(comp, vr_arr, n, val_arr)
+            if status > 1:
+                detail = "; ".join(self.errors()[-3:]) or "no message logged"
+                raise FmuError(f"{self.name}: fmi2SetReal failed ({STATUS[status]}: {detail})")
+
+        return write
+
+    # --- lifecycle ------------------------------------------------------------------------------
+
+    def setup(self, start_time: float = 0.0, stop_time: float | None = None) -> None:
+        """fmi2SetupExperiment."""
+        self._call("setupExperiment", startTime=start_time, stopTime=stop_time)
+
+    def enter_initialization(self) -> None:
+        self._call("enterInitializationMode")
+
+    def exit_initialization(self) -> None:
+        self._call("exitInitializationMode")
+
+    def step(self, t: float, h: float) -> None:
+        """fmi2DoStep; raises FmuError with the FMU's messages unless it returns OK/Warning."""
+        status = self._do_step(self.slave.component, t, h, 1)
+        if status > 1:
+            detail = "; ".join(self.errors()[-3:]) or "no message logged"
+            raise FmuError(f"{self.name}: doStep at t={t} returned {STATUS[status]} ({detail})")
+
+    def get_state(self) -> Any:
+        return self._call("getFMUstate")
+
+    def set_state(self, state: Any) -> None:
+        self._call("setFMUstate", state)
+
+    def free_state(self, state: Any) -> None:
+        self._call("freeFMUstate", state)
+
+    def serialize_state(self, state: Any) -> bytes:
+        return bytes(self._call("serializeFMUstate", state))
+
+    def deserialize_state(self, data: bytes) -> Any:
+        return self._call("deSerializeFMUstate", bytes(data))
+
+    def terminate(self) -> None:
+        self._call("terminate")
+
+    def free(self) -> None:
+        """Free the instance (and unload the library, as fmpy does). Safe to call twice."""
+        if self._alive:
+            self._alive = False
+            self.slave.freeInstance()
+
+
+def _convert(kind: str, value: Any, name: str) -> Any:
+    try:
+        if kind == "Real":
+            return float(value)
+        if kind == "Integer":
+            return int(value)
+        if kind == "Boolean":
+            if isinstance(value, str):
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                return value.lower() in ("true", "1")
+            return bool(value)
+        return str(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"variable {name}: {value!r} is not a valid {kind}") from None

@@ -16,9 +16,11 @@ from fmpy.validation import validate_fmu
 
 from impedance_cosim.fmu import FmuError, FmuInstance
 from impedance_cosim.loop import CONTROLLER_TO_PLANT, PLANT_TO_CONTROLLER, run_models
+from impedance_cosim.regression import REFERENCES, compare, read_csv
 
 DT = 1 / 400
 PLANT, CONTROLLER = "PumaPlant.fmu", "ImpedanceController.fmu"
+REFERENCES_BY_NAME = {p.name.replace("_ref.csv", ".fmu"): p for p in REFERENCES}
 
 
 def started(path, name="x", **params) -> FmuInstance:
@@ -62,6 +64,9 @@ def test_fmpy_simulate_from_a_shell(fmu_dir, tmp_path, name):
         rows = list(csv.DictReader(f))
     assert len(rows) == 8001 and float(rows[-1]["time"]) == 20.0
     assert all(math.isfinite(float(v)) for row in rows for v in row.values())
+    result = {k: np.array([float(r[k]) for r in rows[::40]]) for k in rows[0]}
+    ref = read_csv(REFERENCES_BY_NAME[name])
+    assert compare(result, ref, rtol=1e-9) == []
     if name == PLANT:  # unpowered, the arm falls and ends hanging down, nearly at rest
         assert float(rows[-1]["y"]) < -0.8
         assert abs(float(rows[-1]["q1"]) + math.pi / 2) < 0.1

@@ -126,10 +126,42 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
         tmp_target.replace(target)
 
 
+def build_ssp(out_dir: Path = DEFAULT_OUT, name: str = "PaperScenario") -> Path:
+    """Pack ssp/ (SystemStructure.ssd, the scenario .ssv files) with the FMUs in out_dir into
+    out_dir/<name>.ssp, and validate it against the SSP 1.0 schemas."""
+    from fmpy.ssp.ssd import read_ssd
+
+    from impedance_cosim.system import COMPONENTS
+
+    out_dir = Path(out_dir)
+    source = REPO / "ssp"
+    target = out_dir / f"{name}.ssp"
+    tmp_target = target.with_suffix(".ssp.tmp")
+    with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+        z.write(source / "SystemStructure.ssd", "SystemStructure.ssd")
+        for ssv in sorted(source.glob("*.ssv")):
+            z.write(ssv, f"resources/{ssv.name}")
+        for comp in COMPONENTS:
+            fmu = out_dir / comp.fmu
+            if not fmu.is_file():
+                raise FileNotFoundError(f"{fmu} is missing: build the FMUs first")
+            z.write(fmu, comp.source)
+    try:
+        read_ssd(str(tmp_target), validate=True)
+    except Exception as exc:
+        tmp_target.unlink()
+        raise ValueError(f"{target.name} does not validate: {exc}") from None
+    tmp_target.replace(target)
+    return target
+
+
 def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> list[Path]:
-    """Build the named FMUs (default: all) and return their paths."""
+    """Build the named FMUs (default: all, then the system archive) and return their paths."""
     keys = only or list(FMUS)
     unknown = [k for k in keys if k not in FMUS]
     if unknown:
         raise ValueError(f"unknown FMU {unknown}; choose from {sorted(FMUS)}")
-    return [build_fmu(FMUS[k], out_dir) for k in keys]
+    built = [build_fmu(FMUS[k], out_dir) for k in keys]
+    if not only:
+        built.append(build_ssp(out_dir))
+    return built

@@ -100,7 +100,7 @@ class FmuInstance:
                 raise KeyError(f"{self.path.name} has no variable {name!r}")
             vrs, vals = groups.setdefault(var.type, ([], []))
             vrs.append(var.valueReference)
-            vals.append(_convert(var.type, value, name))
+            vals.append(fmi_value(var.type, value, name))
         for kind, (vrs, vals) in groups.items():
             self._call(f"set{kind}", vrs, vals)
 
@@ -199,17 +199,22 @@ class FmuInstance:
             self.slave.freeInstance()
 
 
-def _convert(kind: str, value: Any, name: str) -> Any:
+def fmi_value(kind: str, value: Any, name: str) -> Any:
+    """value (a Python value or a text literal, e.g. from an .ssv file or the command line)
+    converted to the Python value of an FMI type; ValueError naming the variable if invalid."""
     try:
         if kind == "Real":
             return float(value)
-        if kind == "Integer":
+        if kind in ("Integer", "Enumeration"):
+            if isinstance(value, float) and not value.is_integer():
+                raise ValueError(value)
             return int(value)
         if kind == "Boolean":
             if isinstance(value, str):
-                if value.lower() not in ("true", "false", "1", "0"):
+                text = value.strip().lower()
+                if text not in ("true", "false", "1", "0"):
                     raise ValueError(value)
-                return value.lower() in ("true", "1")
+                return text in ("true", "1")
             return bool(value)
         return str(value)
     except (TypeError, ValueError):

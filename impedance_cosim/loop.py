@@ -1,4 +1,4 @@
-"""The closed loop on the plain models, without FMI: the reference the FMU runs are checked against.
+"""The closed loop on the plain models, without FMI: the reference the master is checked against.
 
 Gauss-Seidel, controller first (the paper's sample-and-hold): at t_i the controller samples the
 plant's outputs at t_i, and the plant integrates over [t_i, t_i + h] with that torque held.
@@ -32,9 +32,12 @@ def run_models(
     controller_parameters: dict[str, Any] | None = None,
     stop_time: float = 20.0,
     step: float = 1 / 400,
+    algorithm: str = "gauss-seidel",
 ) -> dict[str, np.ndarray]:
-    """Run the closed loop; return time and every output ("plant.x", "controller.tau1", ...)
-    at t_i = i * step, i = 0..n (the controller's values are those applied over [t_i, t_i+1])."""
+    """Run the closed loop; return time and every output ("plant.x", "controller.tau1", ...),
+    recorded like the master does: at t_0 after initialization, then at each t_i+1 the outputs
+    after the step that ends there. Jacobi: the plant gets the torque from before the
+    controller's step (one step of delay)."""
     p_names, c_names = output_names(PlantModel), output_names(ControllerModel)
     p_index = {n: i for i, n in enumerate(p_names)}
     c_index = {n: i for i, n in enumerate(c_names)}
@@ -47,15 +50,14 @@ def run_models(
     controller = ControllerModel(controller_parameters or {}, 0.0, tuple(p_out[i] for i in feed))
     n = round(stop_time / step)
     rows = np.empty((n + 1, 1 + len(p_names) + len(c_names)))
-    for i in range(n + 1):
+    rows[0] = (0.0, *p_out, *controller.outputs())
+    for i in range(n):
         t = i * step
-        if i < n:  # sample at t_i (sample 0 was taken at initialization: this is a no-op)
-            controller.do_step(t, step, tuple(p_out[j] for j in feed))
-        c_out = controller.outputs()
-        rows[i] = (t, *p_out, *c_out)  # the last row holds the controller's last sample
-        if i == n:
-            break
+        held = controller.outputs()
+        controller.do_step(t, step, tuple(p_out[j] for j in feed))  # samples at t_i
+        c_out = controller.outputs() if algorithm == "gauss-seidel" else held
         plant.do_step(t, step, tuple(c_out[j] for j in tau_idx))
         p_out = plant.outputs()
+        rows[i + 1] = ((i + 1) * step, *p_out, *controller.outputs())
     names = ["time", *(f"plant.{n}" for n in p_names), *(f"controller.{n}" for n in c_names)]
     return {name: rows[:, k] for k, name in enumerate(names)}

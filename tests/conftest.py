@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.build import FMUS, build_fmu
+from impedance_cosim.build import FMUS, build_fmu, build_ssp
 from impedance_cosim.linalg3 import matvec
 from plant_model.model import PlantModel
 
@@ -19,7 +19,14 @@ def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("fmus")
     for spec in FMUS.values():
         build_fmu(spec, out)
+    build_ssp(out)
     return out
+
+
+@pytest.fixture(scope="session")
+def ssp_path(fmu_dir: Path) -> Path:
+    """The paper's system archive, built from this checkout."""
+    return fmu_dir / "PaperScenario.ssp"
 
 
 def output_dict(model) -> dict[str, float]:

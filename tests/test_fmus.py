@@ -1,5 +1,5 @@
 """The built FMUs as a co-simulation tool sees them: standard compliance, fmpy's CLI, FMU state,
-error reporting, and the closed loop of plant + controller over the FMI interface."""
+error reporting. (The closed loop over FMI is in test_master.py.)"""
 
 from __future__ import annotations
 
@@ -15,7 +15,6 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from impedance_cosim.fmu import FmuError, FmuInstance
-from impedance_cosim.loop import CONTROLLER_TO_PLANT, PLANT_TO_CONTROLLER, run_models
 from impedance_cosim.regression import REFERENCES, compare, read_csv
 
 DT = 1 / 400
@@ -157,116 +156,6 @@ def test_wrong_call_order_is_refused(fmu_dir):
     fmu.exit_initialization()
     with pytest.raises(FmuError, match="cannot be set after initialization"):
         fmu.set({"m1": 2.0})
-
-
-def run_fmus(fmu_dir, stop_time: float, controller_params=None) -> dict[str, np.ndarray]:
-    """Gauss-Seidel loop over the two FMUs (controller first), like impedance_cosim.loop."""
-    plant = started(fmu_dir / PLANT, "plant")
-    controller = FmuInstance(fmu_dir / CONTROLLER, "controller")
-    controller.setup(0.0)
-    controller.set(controller_params or {})
-    controller.enter_initialization()
-    p_names = [v.name for v in plant.description.modelVariables if v.causality == "output"]
-    c_names = [v.name for v in controller.description.modelVariables if v.causality == "output"]
-    read_plant = plant.real_getter(p_names)
-    read_ctrl = controller.real_getter(c_names)
-    p_out = dict(zip(p_names, read_plant(), strict=True))
-    controller.set({c: p_out[p] for p, c in PLANT_TO_CONTROLLER})  # initial exchange
-    controller.exit_initialization()
-    feed_ctrl = controller.real_setter([c for _, c in PLANT_TO_CONTROLLER])
-    feed_plant = plant.real_setter([p for _, p in CONTROLLER_TO_PLANT])
-    p_idx = [p_names.index(p) for p, _ in PLANT_TO_CONTROLLER]
-    c_idx = [c_names.index(c) for c, _ in CONTROLLER_TO_PLANT]
-    n = round(stop_time / DT)
-    rows = []
-    p_vals = read_plant()
-    for i in range(n + 1):
-        t = i * DT
-        if i < n:
-            feed_ctrl([p_vals[j] for j in p_idx])
-            controller.step(t, DT)
-        c_vals = read_ctrl()
-        rows.append([t, *p_vals, *c_vals])
-        if i == n:
-            break
-        feed_plant([c_vals[j] for j in c_idx])
-        plant.step(t, DT)
-        p_vals = read_plant()
-    names = ["time", *(f"plant.{n}" for n in p_names), *(f"controller.{n}" for n in c_names)]
-    data = np.array(rows)
-    for f in (plant, controller):
-        f.terminate()
-        f.free()
-    return {name: data[:, k] for k, name in enumerate(names)}
-
-
-@pytest.fixture(scope="module")
-def paper_run(fmu_dir):
-    return run_fmus(fmu_dir, 20.0)
-
-
-def test_closed_loop_fmus_equal_the_plain_models(paper_run):
-    """The FMI layer adds nothing: the FMU loop reproduces the plain-model loop exactly."""
-    ref = run_models(stop_time=20.0)
-    assert set(ref) == set(paper_run)
-    for name, values in ref.items():
-        assert np.array_equal(paper_run[name], values), name
-
-
-def test_paper_scenario_contact_force(paper_run):
-    """Contact at x = 0.65 m from t = 3.85 s; impact overshoot, then the force settles near
-    k * 0.00196 m = 19.6 N while the tool slides down the wall; contact ends near 6.15 s."""
-    t, force = paper_run["time"], paper_run["plant.contact_force"]
-    in_contact = t[force > 0]
-    assert in_contact[0] == pytest.approx(3.85, abs=0.02)
-    assert 40.0 < force.max() < 150.0  # impact overshoot
-    settled = force[(t >= 5.5) & (t <= 6.1)]
-    assert np.all(np.abs(settled - 19.6) < 0.5)
-    second = force[(t >= 15.5) & (t <= 16.1)]
-    assert np.all(np.abs(second - 19.6) < 0.5)
-    assert force[(t > 6.3) & (t < 13.8)].max() == 0.0
-
-
-def test_paper_scenario_tracking_and_observer(paper_run):
-    t = paper_run["time"]
-    e = np.hypot(paper_run["controller.e_x"], paper_run["controller.e_y"])
-    assert e[(t >= 2.0) & (t <= 3.8)].max() < 1e-3  # small before contact (after start-up)
-    obs_err = np.max(
-        [np.abs(paper_run[f"controller.qd_obs{i}"] - paper_run[f"plant.qd{i}"]) for i in (1, 2, 3)],
-        axis=0,
-    )
-    start_up = obs_err[t <= 0.5].max()
-    assert start_up > 5e-3  # the arm starts at rest while the trajectory moves: a transient
-    assert obs_err[(t >= 2.0) & (t <= 3.8)].max() < start_up / 5  # ... that decays
-    # at the impact the observer error jumps, then decays again within 0.5 s
-    impact = obs_err[(t >= 3.8) & (t <= 4.3)].max()
-    assert obs_err[(t >= 5.0) & (t <= 6.0)].max() < impact
-
-
-def test_sampling_is_independent_of_the_master_step(fmu_dir):
-    """Stepped at 1/4000 s, the controller produces the same torque samples as at 1/400 s."""
-    coarse = run_fmus(fmu_dir, 1.0)
-    plant = started(fmu_dir / PLANT, "plant")
-    controller = FmuInstance(fmu_dir / CONTROLLER, "controller")
-    controller.setup(0.0)
-    controller.enter_initialization()
-    outs = [p for p, _ in PLANT_TO_CONTROLLER]
-    controller.set(dict(zip([c for _, c in PLANT_TO_CONTROLLER], plant.get(outs), strict=True)))
-    controller.exit_initialization()
-    taus = []
-    h = DT / 10
-    for i in range(4000):
-        t = i * h
-        controller.set(dict(zip([c for _, c in PLANT_TO_CONTROLLER], plant.get(outs), strict=True)))
-        controller.step(t, h)
-        tau = controller.get(["tau1", "tau2", "tau3"])
-        if i % 10 == 0:
-            taus.append(tau)
-        plant.set(dict(zip(["tau1", "tau2", "tau3"], tau, strict=True)))
-        plant.step(t, h)
-    fine = np.array(taus)
-    ref = np.column_stack([coarse[f"controller.tau{i}"][:400] for i in (1, 2, 3)])
-    assert np.abs(fine - ref).max() < 1e-6 * np.abs(ref).max()
 
 
 def test_two_instances_in_one_process(fmu_dir):

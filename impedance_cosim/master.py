@@ -1,0 +1,357 @@
+"""The co-simulation master: runs an SSP system of FMUs at a fixed communication step.
+
+- Parameters: the chosen parameter set of the SSD's ParameterBindings (default: the first), then
+  the user's overrides ("component.variable" = value; "controller.K" sets K1..K3).
+- Initialization: every FMU enters initialization mode, then the master exchanges the connected
+  values until they stop changing (a fixed point; our FMUs need two passes), then exits.
+- Stepping, t_i = start + i * h exactly (no accumulated time):
+  * Gauss-Seidel: the components in order (default controller, then plant: the paper's
+    sample-and-hold) each take their inputs from the latest outputs, then step;
+  * Jacobi: all inputs are taken from the outputs at t_i, then all components step.
+- Recording: one row at t_0 (after initialization) and one at each t_i+1 = the outputs after the
+  step that ends there (as FMI defines them: a sampled output holds the last sample's value), every
+  Real output of every component ("plant.x", "controller.tau1", ...), so every connection too.
+- Every FMI status is checked. A failing FMU, a non-finite value or a value beyond
+  `divergence_limit` stops the run with a message naming the signal and time; the rows computed so
+  far are kept in the result.
+"""
+
+from __future__ import annotations
+
+import sys
+import time as wallclock
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from impedance_cosim.fmu import FmuError, FmuInstance, fmi_value
+from impedance_cosim.ssp import SspError, SystemDescription
+
+ALGORITHMS = ("gauss-seidel", "jacobi")
+MAX_INIT_PASSES = 20
+
+
+class MasterError(RuntimeError):
+    """The system cannot be run as configured (bad parameter name, missing connector...)."""
+
+
+@dataclass
+class RunResult:
+    """Recorded signals (rows up to where the run stopped) and why it stopped, if it failed."""
+
+    names: list[str]
+    data: np.ndarray
+    step_size: float
+    algorithm: str
+    parameter_set: str
+    error: str | None = None
+    wall_time: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.data[:, self.names.index(name)]
+        except ValueError:
+            raise KeyError(f"no recorded signal {name!r}") from None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def split_name(name: str) -> tuple[str, str]:
+    """ "component.variable" -> (component, variable), with a clear error."""
+    if "." not in name:
+        raise MasterError(f"parameter {name!r} must be written component.variable")
+    comp, var = name.split(".", 1)
+    return comp, var
+
+
+class _Slot:
+    """One component during a run: its FMU instance and fast accessors."""
+
+    def __init__(self, name: str, fmu: FmuInstance) -> None:
+        self.name = name
+        self.fmu = fmu
+        self.outputs = [
+            v.name for v in fmu.description.modelVariables
+            if v.causality == "output" and v.type == "Real"
+        ]  # fmt: skip
+        self.read = fmu.real_getter(self.outputs)
+        self.values: list[float] = []
+        self.inputs: list[str] = []
+        self.sources: list[tuple[int, int]] = []  # (slot index, output index) per input
+        self.write = None
+
+
+class Master:
+    """Prepare and run one system (see module docstring)."""
+
+    def __init__(
+        self,
+        system: SystemDescription,
+        parameter_set: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        algorithm: str | None = None,
+        step_size: float | None = None,
+        stop_time: float | None = None,
+        divergence_limit: float = 1e6,
+        fmu_files: Mapping[str, Path] | None = None,
+    ) -> None:
+        self.system = system
+        self.algorithm = algorithm or system.algorithm or "gauss-seidel"
+        if self.algorithm not in ALGORITHMS:
+            raise MasterError(f"algorithm must be one of {ALGORITHMS} (got {self.algorithm!r})")
+        self.step_size = step_size or system.step_size
+        if not self.step_size or not self.step_size > 0:
+            raise MasterError(f"step size must be > 0 (got {self.step_size})")
+        self.start_time = system.start_time
+        self.stop_time = stop_time if stop_time is not None else system.stop_time
+        if self.stop_time is None or not self.stop_time > self.start_time:
+            raise MasterError(f"stop time must be > start time (got {self.stop_time})")
+        steps = (self.stop_time - self.start_time) / self.step_size
+        if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+            raise MasterError(
+                f"the run length {self.stop_time - self.start_time:g} s is not a whole number of"
+                f" {self.step_size:g} s steps"
+            )
+        self.divergence_limit = divergence_limit
+        sets = system.parameter_sets
+        if parameter_set is None:
+            parameter_set = next(iter(sets), "")
+        elif parameter_set not in sets:
+            raise MasterError(f"no parameter set {parameter_set!r} in the SSD (have {list(sets)})")
+        self.parameter_set = parameter_set
+        order = system.order or [c.name for c in system.components]
+        names = [c.name for c in system.components]
+        if sorted(order) != sorted(names):
+            raise MasterError(f"the step order {order} does not list the components {names}")
+        self.order = order
+        self.fmu_files = {c.name: Path(c.fmu) for c in system.components}
+        for name, path in (fmu_files or {}).items():
+            if name not in self.fmu_files:
+                raise MasterError(f"no component {name!r} to replace (have {names})")
+            self.fmu_files[name] = Path(path)
+        self.parameters = self._collect_parameters(overrides or {})
+
+    # --- configuration checks -------------------------------------------------------------------
+
+    def _collect_parameters(self, overrides: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+        """Parameter values per component, checked against the FMUs' variables and units."""
+        from fmpy import read_model_description
+
+        self.descriptions = {}
+        for name, path in self.fmu_files.items():
+            if not path.is_file():
+                raise MasterError(f"component {name}: FMU {path} does not exist")
+            try:
+                self.descriptions[name] = read_model_description(str(path))
+            except Exception as exc:
+                raise MasterError(f"component {name}: cannot read {path.name}: {exc}") from None
+        variables = {
+            name: {v.name: v for v in md.modelVariables} for name, md in self.descriptions.items()
+        }
+        self._check_connectors(variables)
+        values: dict[str, dict[str, Any]] = {name: {} for name in self.fmu_files}
+        for p in self.system.parameter_sets.get(self.parameter_set, []):
+            comp, var = split_name(p.name)
+            v = self._parameter_variable(
+                variables, comp, var, f"in parameter set {self.parameter_set!r}"
+            )
+            if p.unit and v.unit and p.unit != v.unit:
+                raise MasterError(f"parameter {p.name}: unit {p.unit} but the FMU's is {v.unit}")
+            values[comp][var] = self._value(v, p.value, p.name)
+        for name, value in overrides.items():
+            comp, var = split_name(name)
+            targets = [var]
+            if comp in variables and var not in variables[comp]:
+                vector = [f"{var}{i}" for i in (1, 2, 3)] + [f"{var}_{i}" for i in (1, 2, 3)]
+                targets = [n for n in vector if n in variables[comp]] or [var]
+            for t in targets:
+                v = self._parameter_variable(variables, comp, t, "given with --set")
+                values[comp][t] = self._value(v, value, f"{comp}.{t}")
+        return values
+
+    def _parameter_variable(self, variables, comp: str, var: str, where: str):
+        if comp not in variables:
+            raise MasterError(f"unknown component {comp!r} {where} (have {list(variables)})")
+        v = variables[comp].get(var)
+        if v is None:
+            raise MasterError(f"unknown parameter {comp}.{var} {where}")
+        if v.causality != "parameter":
+            raise MasterError(f"{comp}.{var} is a{'n' if v.causality[0] in 'aeiou' else ''} "
+                              f"{v.causality}, not a parameter")  # fmt: skip
+        return v
+
+    @staticmethod
+    def _value(v, value: Any, name: str) -> Any:
+        try:
+            return fmi_value(v.type, value, name)
+        except ValueError as exc:
+            raise MasterError(str(exc)) from None
+
+    def _check_connectors(self, variables) -> None:
+        """Every SSD connector exists in its FMU with the same causality, type and unit."""
+        problems = []
+        for comp in self.system.components:
+            fmu_vars = variables[comp.name]
+            for c in comp.connectors.values():
+                v = fmu_vars.get(c.name)
+                where = f"{comp.name}.{c.name}"
+                if v is None:
+                    problems.append(
+                        f"{where}: no such variable in {self.fmu_files[comp.name].name}"
+                    )
+                    continue
+                if v.causality != c.kind:
+                    problems.append(
+                        f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD"
+                    )
+                if v.type != c.type:
+                    problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
+                if c.type == "Real" and (v.unit or None) != (c.unit or None):
+                    problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
+        if problems:
+            raise MasterError("the FMUs do not match the SSD: " + "; ".join(problems))
+
+    # --- run ------------------------------------------------------------------------------------
+
+    def run(self, progress: bool = False) -> RunResult:
+        """Run the system; never raises for a failure during the run (see RunResult.error)."""
+        slots = {name: _Slot(name, FmuInstance(self.fmu_files[name], name)) for name in self.order}
+        ordered = [slots[n] for n in self.order]
+        index = {s.name: i for i, s in enumerate(ordered)}
+        for se, sc, ee, ec in self.system.connections:
+            dst = slots[ee]
+            dst.inputs.append(ec)
+            dst.sources.append((index[se], slots[se].outputs.index(sc)))
+        for s in ordered:
+            s.write = s.fmu.real_setter(s.inputs)
+        names = ["time", *(f"{s.name}.{o}" for s in ordered for o in s.outputs)]
+        h, t0 = self.step_size, self.start_time
+        n = int(round((self.stop_time - t0) / h))
+        data = np.empty((n + 1, len(names)))
+        rows, error = 0, None
+        started = wallclock.perf_counter()
+        bar = _Progress(n, h) if progress else None
+        try:
+            self._initialize(ordered)
+            data[0] = (t0, *(v for s in ordered for v in s.values))
+            rows = 1
+            error = self._check_row(names, data[0], t0)
+            jacobi = self.algorithm == "jacobi"
+            for i in range(n):
+                if error:
+                    break
+                t = t0 + i * h
+                if jacobi:
+                    for s in ordered:
+                        s.write([ordered[j].values[k] for j, k in s.sources])
+                    for s in ordered:
+                        s.fmu.step(t, h)
+                    for s in ordered:
+                        s.values = s.read()
+                else:
+                    for s in ordered:
+                        s.write([ordered[j].values[k] for j, k in s.sources])
+                        s.fmu.step(t, h)
+                        s.values = s.read()
+                t_next = t0 + (i + 1) * h
+                data[rows] = (t_next, *(v for s in ordered for v in s.values))
+                rows += 1
+                error = self._check_row(names, data[rows - 1], t_next)
+                if bar:
+                    bar.update(i + 1)
+        except (FmuError, SspError, ValueError, KeyError) as exc:
+            error = str(exc)
+        finally:
+            if bar:
+                bar.close()
+            for s in ordered:
+                try:
+                    s.fmu.terminate()
+                except FmuError:
+                    pass
+                s.fmu.free()
+        return RunResult(
+            names=names,
+            data=data[:rows],
+            step_size=h,
+            algorithm=self.algorithm,
+            parameter_set=self.parameter_set,
+            error=error,
+            wall_time=wallclock.perf_counter() - started,
+        )
+
+    def _initialize(self, ordered: list[_Slot]) -> None:
+        for s in ordered:
+            s.fmu.setup(self.start_time, self.stop_time)
+            s.fmu.set(self.parameters[s.name])
+            s.fmu.enter_initialization()
+
+        # First values: components whose outputs depend on no input (declared in ModelStructure)
+        # are read first, so the others start from real inputs rather than their start values.
+        def independent(s: _Slot) -> bool:
+            outs = s.fmu.description.outputs
+            return bool(outs) and all(u.dependencies == [] for u in outs)
+
+        for s in sorted(ordered, key=lambda s: not independent(s)):
+            ready = [(j, k) for j, k in s.sources if ordered[j].values]
+            if s.sources and len(ready) == len(s.sources):
+                s.write([ordered[j].values[k] for j, k in s.sources])
+            s.values = s.read()
+        for _ in range(MAX_INIT_PASSES):
+            changed = False
+            for s in ordered:
+                new = [ordered[j].values[k] for j, k in s.sources]
+                s.write(new)
+                values = s.read()
+                changed |= values != s.values
+                s.values = values
+            if not changed:
+                break
+        else:
+            raise MasterError(f"initial values did not settle in {MAX_INIT_PASSES} passes")
+        for s in ordered:
+            s.fmu.exit_initialization()
+            s.values = s.read()
+
+    def _check_row(self, names: list[str], row: np.ndarray, t: float) -> str | None:
+        bad = ~np.isfinite(row) | (np.abs(row) > self.divergence_limit)
+        if not bad.any():
+            return None
+        k = int(np.argmax(bad))
+        return (
+            f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g}"
+            f" (limit {self.divergence_limit:g}); results kept up to there"
+        )
+
+
+class _Progress:
+    """A one-line progress bar on stderr, shown once a run has taken more than a second."""
+
+    def __init__(self, steps: int, h: float) -> None:
+        self.steps, self.h = steps, h
+        self.start = wallclock.perf_counter()
+        self.last = 0.0
+        self.shown = False
+
+    def update(self, i: int) -> None:
+        now = wallclock.perf_counter() - self.start
+        if now < 1.0 or now - self.last < 0.2:
+            return
+        self.last, self.shown = now, True
+        frac = i / self.steps
+        bar = "#" * int(30 * frac)
+        rtf = i * self.h / now
+        sys.stderr.write(
+            f"\r[{bar:<30}] {100 * frac:5.1f}%  t={i * self.h:7.2f} s  {rtf:6.1f}x real time"
+        )
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.shown:
+            sys.stderr.write("\n")

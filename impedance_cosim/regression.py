@@ -8,13 +8,13 @@ against them; regenerate deliberately after an intended change of results with
 from __future__ import annotations
 
 import argparse
-import csv
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from controller_model.model import ControllerModel
+from impedance_cosim.analysis import read_csv, write_csv
 from impedance_cosim.build import REPO
 from impedance_cosim.loop import output_names, run_models
 from plant_model.model import PlantModel
@@ -61,25 +61,6 @@ REFERENCES: dict[Path, Callable[[], dict[str, np.ndarray]]] = {
 }
 
 
-def write_csv(path: Path, data: dict[str, np.ndarray]) -> None:
-    """CSV with a header row, readable by fmpy.util.read_csv; 17 significant digits."""
-    names = list(data)
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(names)
-        for row in zip(*(data[n] for n in names), strict=True):
-            w.writerow([repr(float(v)) for v in row])
-
-
-def read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a CSV written by write_csv (or by fmpy), by name."""
-    with open(path, newline="") as f:
-        reader = csv.reader(f)
-        names = [n.strip('"') for n in next(reader)]
-        data = np.array([[float(v) for v in row] for row in reader])
-    return {n: data[:, k] for k, n in enumerate(names)}
-
-
 def compare(result: dict[str, np.ndarray], ref: dict[str, np.ndarray], rtol: float) -> list[str]:
     """Differences beyond rtol * (column range + 1e-12), by column; empty when they agree."""
     problems = []
@@ -105,7 +86,7 @@ def main() -> None:
     for path, make in REFERENCES.items():
         data = make()
         if args.write:
-            write_csv(path, data)
+            write_csv(path, list(data), np.column_stack(list(data.values())))
             print(f"wrote {path.relative_to(REPO)} ({len(data['time'])} rows)")
         else:
             problems = compare(data, read_csv(path), 1e-9)

@@ -1,0 +1,73 @@
+"""The command line: run a scenario end to end, and one-line errors for bad input."""
+
+from __future__ import annotations
+
+import zipfile
+
+import numpy as np
+import pytest
+from fmpy.util import read_csv
+
+from impedance_cosim.cli import main
+
+
+def test_run_writes_results_summary_and_figures(ssp_path, tmp_path, capsys):
+    out = tmp_path / "res"
+    code = main(["run", "--ssp", str(ssp_path), "--stop", "4.5", "--out", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "impact peak force" in text and "settled contact force" in text
+    result = read_csv(out / "observer.csv")  # fmpy's reader: fmpy's plotting works on it
+    assert len(result) == 1801 and result["time"][-1] == 4.5
+    assert result["plant.contact_force"].max() > 40.0
+    for name in ("fig1_position_force", "fig2_observer", "fig3_velocity_tracking",
+                 "fig4_observer_vs_difference"):  # fmt: skip
+        assert (out / f"{name}.png").stat().st_size > 10_000
+    assert (out / "difference.csv").is_file() and (out / "observer_summary.json").is_file()
+
+
+def test_options_reach_the_master(ssp_path, tmp_path):
+    out = tmp_path / "res"
+    args = ["run", "--ssp", str(ssp_path), "--stop", "0.5", "--step", "0.00125", "--out", str(out)]
+    assert main([*args, "--algorithm", "jacobi", "--scenario", "measured", "--no-figures",
+                 "--set", "controller.K=80"]) == 0  # fmt: skip
+    result = read_csv(out / "measured.csv")
+    assert len(result) == 401 and np.array_equal(result["time"], np.arange(401) * 0.00125)
+
+
+def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
+    out = tmp_path / "res"
+    args = ["run", "--ssp", str(ssp_path), "--stop", "5", "--out", str(out), "--set"]
+    assert main([*args, "controller.G=1e9"]) == 1
+    err = capsys.readouterr().err
+    assert "error:" in err and "partial results kept" in err
+    rows = read_csv(out / "observer.csv")
+    assert 2 < len(rows) < 2001
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--set", "controller.Kx=3"], "unknown parameter controller.Kx"),
+        (["--set", "controller.K1"], "--set expects component.variable=value"),
+        (["--scenario", "fast"], "no parameter set 'fast'"),
+        (["--step", "-1"], "step size must be > 0"),
+    ],
+)
+def test_bad_options_give_one_line_errors(ssp_path, tmp_path, capsys, args, message):
+    assert main(["run", "--ssp", str(ssp_path), "--out", str(tmp_path), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_malformed_ssd_gives_a_one_line_error(ssp_path, tmp_path, capsys):
+    bad = tmp_path / "bad.ssp"
+    with zipfile.ZipFile(ssp_path) as zin, zipfile.ZipFile(bad, "w") as zout:
+        for name in zin.namelist():
+            data = zin.read(name)
+            if name == "SystemStructure.ssd":
+                data = data.replace(b"<ssd:Elements>", b"<ssd:Elementz>", 1)
+            zout.writestr(name, data)
+    assert main(["run", "--ssp", str(bad), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "malformed SSD" in err and len(err.splitlines()) == 1

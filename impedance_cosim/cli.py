@@ -9,7 +9,6 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_SSP = REPO / "fmus" / "PaperScenario.ssp"
-SOURCES = ("impedance_cosim", "plant_model", "controller_model", "ssp")
 
 
 class CliError(Exception):
@@ -25,16 +24,18 @@ def _cmd_build(args: argparse.Namespace) -> int:
 
 
 def _stale(target: Path) -> bool:
-    """True when target is missing or older than any source file it is built from."""
+    """True when target is missing or older than a file it is built from (the code bundled into
+    the FMUs, the build itself, the SSP sources)."""
+    from impedance_cosim.build import FMU_CORE, FMUS
+
     if not target.is_file():
         return True
+    core = REPO / "impedance_cosim"
+    sources = [core / "build.py", core / "system.py", *(core / item for item in FMU_CORE)]
+    sources += [REPO / spec.package for spec in FMUS.values()] + [REPO / "ssp"]
+    files = [f for s in sources for f in ([s] if s.is_file() else s.rglob("*"))]
     built = target.stat().st_mtime
-    return any(
-        f.stat().st_mtime > built
-        for folder in SOURCES
-        for f in (REPO / folder).rglob("*")
-        if f.suffix in (".py", ".ssd", ".ssv")
-    )
+    return any(f.suffix in (".py", ".ssd", ".ssv") and f.stat().st_mtime > built for f in files)
 
 
 def parse_overrides(items: list[str]) -> dict[str, str]:

@@ -7,7 +7,8 @@ Conventions: the arm moves in the vertical x-y plane, gravity acts along -y, joi
 relative (q2 is measured from link 1, q3 from link 2), the end-effector pose is
 x = (x, y, phi) with phi = q1 + q2 + q3. Equation (1): H qdd + C qd + F qd + g = tau - J^T F_ext.
 The printed model has typos (see shared/paper/ERRATA.md): H22/H33 use I_m2/I_m3, the first inertia
-triple is the link inertias I_u, and C11 is taken from the Christoffel symbols. tests/test_arm.py
+triple is the link inertias I_u, and C11 is taken from the Christoffel symbols. The terms are
+generated from a symbolic Lagrangian derivation (impedance_cosim/derivation.py); tests/test_arm.py
 checks every term independently (Christoffel symbols from finite differences of H, the gradient of
 the potential energy, finite differences of the kinematics, a rigid-body inertia built from the
 links' centre-of-mass Jacobians).
@@ -18,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
+from impedance_cosim import arm_terms as terms
 from impedance_cosim.linalg3 import Mat3, Vec3, matvec, solve
 
 
@@ -79,65 +81,29 @@ class UnreachablePoseError(ValueError):
 
 
 class Arm:
-    """Kinematics and dynamics of the planar arm, on plain floats (see module docstring)."""
+    """Kinematics and dynamics of the planar arm, on plain floats (see module docstring).
+
+    The terms (kinematics, J, Jdot, H, C, g, V) are generated from one symbolic derivation
+    (impedance_cosim/derivation.py -> arm_terms.py, and arm_terms.c for the native FMUs)."""
 
     def __init__(self, params: ArmParams | None = None) -> None:
         p = params if params is not None else ArmParams()
         p.validate()
         self.params = p
-        # Inertia-matrix constants: H depends on q2, q3 only (section 5, H with ERRATA fixes).
-        self._A = p.m2 * p.a1 * p.rx2 + p.m3 * p.a1 * p.a2  # coefficient of cos(q2)
-        self._B = p.m3 * p.a1 * p.rx3  # coefficient of cos(q2 + q3)
-        self._D = p.m3 * p.a2 * p.rx3  # coefficient of cos(q3)
-        k3 = p.Iu3 + p.m3 * p.rx3**2
-        k2 = p.Iu2 + p.m2 * p.rx2**2 + p.m3 * p.a2**2 + k3
-        k1 = p.Iu1 + p.m1 * (p.rx1**2 + p.ry1**2) + (p.m2 + p.m3) * p.a1**2 + k2
-        self._k = (k1, k2, k3)
 
     # --- kinematics, eq. (2) ---------------------------------------------------------------
 
     def kinematics(self, q: Vec3) -> Vec3:
         """End-effector pose x = kin(q) = (x, y, phi), eq. (2a)."""
-        p = self.params
-        q12 = q[0] + q[1]
-        q123 = q12 + q[2]
-        return (
-            p.a1 * math.cos(q[0]) + p.a2 * math.cos(q12) + p.a3 * math.cos(q123),
-            p.a1 * math.sin(q[0]) + p.a2 * math.sin(q12) + p.a3 * math.sin(q123),
-            q123,
-        )
+        return terms.kinematics(self.params, q)
 
     def jacobian(self, q: Vec3) -> Mat3:
         """J(q), with xd = J qd, eq. (2b)."""
-        p = self.params
-        q12 = q[0] + q[1]
-        q123 = q12 + q[2]
-        s1, s12, s123 = p.a1 * math.sin(q[0]), p.a2 * math.sin(q12), p.a3 * math.sin(q123)
-        c1, c12, c123 = p.a1 * math.cos(q[0]), p.a2 * math.cos(q12), p.a3 * math.cos(q123)
-        return (
-            (-(s1 + s12 + s123), -(s12 + s123), -s123),
-            (c1 + c12 + c123, c12 + c123, c123),
-            (1.0, 1.0, 1.0),
-        )
+        return terms.jacobian(self.params, q)
 
     def jacobian_dot(self, q: Vec3, qd: Vec3) -> Mat3:
         """dJ/dt along the motion qd, for xdd = J qdd + Jdot qd, eq. (2c)."""
-        p = self.params
-        q12 = q[0] + q[1]
-        q123 = q12 + q[2]
-        w1, w12 = qd[0], qd[0] + qd[1]
-        w123 = w12 + qd[2]
-        s1 = p.a1 * math.sin(q[0]) * w1
-        s12 = p.a2 * math.sin(q12) * w12
-        s123 = p.a3 * math.sin(q123) * w123
-        c1 = p.a1 * math.cos(q[0]) * w1
-        c12 = p.a2 * math.cos(q12) * w12
-        c123 = p.a3 * math.cos(q123) * w123
-        return (
-            (-(c1 + c12 + c123), -(c12 + c123), -c123),
-            (-(s1 + s12 + s123), -(s12 + s123), -s123),
-            (0.0, 0.0, 0.0),
-        )
+        return terms.jacobian_dot(self.params, q, qd)
 
     def jacobian_det(self, q: Vec3) -> float:
         """det J(q) = a1 a2 sin(q2): zero at the stretched and folded elbow singularities."""
@@ -168,44 +134,15 @@ class Arm:
 
     def inertia(self, q: Vec3) -> Mat3:
         """H(q) = I_r(q) + I_m: link inertia plus motor inertia on the diagonal."""
-        p = self.params
-        k1, k2, k3 = self._k
-        A = self._A * math.cos(q[1])
-        B = self._B * math.cos(q[1] + q[2])
-        D = self._D * math.cos(q[2])
-        h12 = k2 + A + B + 2.0 * D
-        h13 = k3 + B + D
-        h23 = k3 + D
-        return (
-            (p.Im1 + k1 + 2.0 * (A + B + D), h12, h13),
-            (h12, p.Im2 + k2 + 2.0 * D, h23),
-            (h13, h23, p.Im3 + k3),
-        )
+        return terms.inertia(self.params, q)
 
     def coriolis(self, q: Vec3, qd: Vec3) -> Mat3:
-        """C(q, qd) in Christoffel form (C11 corrected per ERRATA.md), so Hdot - 2C is skew."""
-        w1, w2, w3 = qd
-        w12 = w1 + w2
-        w123 = w12 + w3
-        A = self._A * math.sin(q[1])
-        B = self._B * math.sin(q[1] + q[2])
-        D = self._D * math.sin(q[2])
-        return (
-            (-A * w2 - B * (w2 + w3) - D * w3, -A * w12 - B * w123 - D * w3, -(B + D) * w123),
-            (A * w1 + B * w1 - D * w3, -D * w3, -D * w123),
-            (B * w1 + D * w12, D * w12, 0.0),
-        )
+        """C(q, qd) in Christoffel form, so Hdot - 2C is skew-symmetric."""
+        return terms.coriolis(self.params, q, qd)
 
     def gravity(self, q: Vec3) -> Vec3:
         """g(q): gradient of the potential energy, gravity along -y."""
-        p = self.params
-        q12 = q[0] + q[1]
-        c1, s1 = math.cos(q[0]), math.sin(q[0])
-        c12, c123 = math.cos(q12), math.cos(q12 + q[2])
-        g3 = p.g * p.m3 * p.rx3 * c123
-        g2 = p.g * (p.m2 * p.rx2 + p.m3 * p.a2) * c12 + g3
-        g1 = p.g * (p.m1 * (p.rx1 * c1 - p.ry1 * s1) + (p.m2 + p.m3) * p.a1 * c1) + g2
-        return (g1, g2, g3)
+        return terms.gravity(self.params, q)
 
     def friction(self, qd: Vec3) -> Vec3:
         """Viscous friction torque F qd, F = diag(f1, f2, f3)."""
@@ -214,16 +151,16 @@ class Arm:
 
     def forward_dynamics(self, q: Vec3, qd: Vec3, tau: Vec3) -> Vec3:
         """qdd = H^-1 (tau - C qd - F qd - g), eq. (5); tau is the net joint torque
-        (motor torque minus J^T F_ext)."""
-        cqd = matvec(self.coriolis(q, qd), qd)
-        grav = self.gravity(q)
+        (motor torque minus J^T F_ext). native/src/arm.c mirrors it operation for operation."""
+        cqd = matvec(terms.coriolis(self.params, q, qd), qd)
+        grav = terms.gravity(self.params, q)
         p = self.params
         rhs = (
             tau[0] - cqd[0] - p.f1 * qd[0] - grav[0],
             tau[1] - cqd[1] - p.f2 * qd[1] - grav[1],
             tau[2] - cqd[2] - p.f3 * qd[2] - grav[2],
         )
-        return solve(self.inertia(q), rhs)
+        return solve(terms.inertia(self.params, q), rhs)
 
     # --- energy (for checks and analysis) ---------------------------------------------------
 
@@ -234,11 +171,4 @@ class Arm:
 
     def potential_energy(self, q: Vec3) -> float:
         """V = g * sum(m_i * y_ci): the height of each centre of mass, zero at the shoulder."""
-        p = self.params
-        q12 = q[0] + q[1]
-        s1, c1 = math.sin(q[0]), math.cos(q[0])
-        s12, s123 = math.sin(q12), math.sin(q12 + q[2])
-        y1 = p.rx1 * s1 + p.ry1 * c1
-        y2 = p.a1 * s1 + p.rx2 * s12
-        y3 = p.a1 * s1 + p.a2 * s12 + p.rx3 * s123
-        return p.g * (p.m1 * y1 + p.m2 * y2 + p.m3 * y3)
+        return terms.potential_energy(self.params, q)

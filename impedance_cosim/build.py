@@ -18,7 +18,7 @@ from impedance_cosim.fmi.variables import model_description
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
 DEFAULT_OUT = REPO / "fmus"
 # The part of impedance_cosim that runs inside the FMUs (standard library only, plus pythonfmu).
-FMU_CORE = ("__init__.py", "arm.py", "linalg3.py", "ode.py", "wall.py", "fmi")
+FMU_CORE = ("__init__.py", "arm.py", "arm_terms.py", "linalg3.py", "ode.py", "wall.py", "fmi")
 
 
 @dataclass(frozen=True)

@@ -63,13 +63,8 @@ def derive() -> dict[str, tuple[list[str], sp.Matrix]]:
     C = sp.zeros(3, 3)
     for k in range(3):
         for j in range(3):
-            C[k, j] = sp.simplify(
-                sum(
-                    sp.Rational(1, 2) * (H[k, j].diff(q[i]) + H[k, i].diff(q[j]) - H[i, j].diff(q[k]))
-                    * qd[i]
-                    for i in range(3)
-                )
-            )  # fmt: skip
+            c_kji = [H[k, j].diff(q[i]) + H[k, i].diff(q[j]) - H[i, j].diff(q[k]) for i in range(3)]
+            C[k, j] = sp.simplify(sum(sp.Rational(1, 2) * c_kji[i] * qd[i] for i in range(3)))
     V = p["g"] * sum(p[m] * c[1] for m, c in zip(("m1", "m2", "m3"), coms, strict=True))
     grav = sp.Matrix([sp.simplify(V.diff(qi)) for qi in q])
     return {

@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import sys
 import time as wallclock
 from collections.abc import Mapping
@@ -27,10 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.fmu import FmuError, FmuInstance, fmi_value
+from impedance_cosim import fastloop
+from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, fmi_value
 from impedance_cosim.ssp import SspError, SystemDescription
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
+CHUNK = 400  # steps per call into the loop (progress bar, interrupts)
 MAX_INIT_PASSES = 20
 
 
@@ -100,6 +103,7 @@ class Master:
         stop_time: float | None = None,
         divergence_limit: float = 1e6,
         fmu_files: Mapping[str, Path] | None = None,
+        loop: str = "auto",
     ) -> None:
         self.system = system
         self.algorithm = algorithm or system.algorithm or "gauss-seidel"
@@ -119,6 +123,9 @@ class Master:
                 f" {self.step_size:g} s steps"
             )
         self.divergence_limit = divergence_limit
+        if loop not in ("auto", "c", "python"):
+            raise MasterError(f"loop must be auto, c or python (got {loop!r})")
+        self.loop = loop
         sets = system.parameter_sets
         if parameter_set is None:
             parameter_set = next(iter(sets), "")
@@ -242,29 +249,16 @@ class Master:
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             error = self._check_row(names, data[0], t0)
-            jacobi = self.algorithm == "jacobi"
-            for i in range(n):
-                if error:
-                    break
-                t = t0 + i * h
-                if jacobi:
-                    for s in ordered:
-                        s.write([ordered[j].values[k] for j, k in s.sources])
-                    for s in ordered:
-                        s.fmu.step(t, h)
-                    for s in ordered:
-                        s.values = s.read()
-                else:
-                    for s in ordered:
-                        s.write([ordered[j].values[k] for j, k in s.sources])
-                        s.fmu.step(t, h)
-                        s.values = s.read()
-                t_next = t0 + (i + 1) * h
-                data[rows] = (t_next, *(v for s in ordered for v in s.values))
-                rows += 1
-                error = self._check_row(names, data[rows - 1], t_next)
+            fast = fastloop.load() if self.loop != "python" else None
+            if self.loop == "c" and fast is None:
+                raise MasterError("the C loop cannot be compiled here (no C compiler?)")
+            step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
+            while not error and rows < n + 1:
+                chunk = min(n + 1 - rows, CHUNK)
+                done, error = step(ordered, data, names, rows - 1, chunk)
+                rows += done
                 if bar:
-                    bar.update(i + 1)
+                    bar.update(rows - 1)
         except (FmuError, SspError, ValueError, KeyError) as exc:
             error = str(exc)
         finally:
@@ -285,6 +279,79 @@ class Master:
             error=error,
             wall_time=wallclock.perf_counter() - started,
         )
+
+    def _python_steps(self, ordered, data, names, first: int, count: int):
+        """Steps first .. first + count - 1 in Python; returns (rows filled, error or None)."""
+        h, t0 = self.step_size, self.start_time
+        jacobi = self.algorithm == "jacobi"
+        for i in range(first, first + count):
+            t = t0 + i * h
+            try:
+                if jacobi:
+                    for s in ordered:
+                        s.write([ordered[j].values[k] for j, k in s.sources])
+                    for s in ordered:
+                        s.fmu.step(t, h)
+                    for s in ordered:
+                        s.values = s.read()
+                else:
+                    for s in ordered:
+                        s.write([ordered[j].values[k] for j, k in s.sources])
+                        s.fmu.step(t, h)
+                        s.values = s.read()
+            except FmuError as exc:
+                return i - first, str(exc)
+            t_next = t0 + (i + 1) * h
+            data[i + 1] = (t_next, *(v for s in ordered for v in s.values))
+            error = self._check_row(names, data[i + 1], t_next)
+            if error:
+                return i + 1 - first, error
+        return count, None
+
+    def _c_steps(self, lib, ordered, data, names):
+        """The same steps in the compiled loop (native/master/loop.c); returns a step function."""
+        offsets, col = {}, 1
+        for s in ordered:
+            offsets[s.name] = col
+            col += len(s.outputs)
+        comps = (fastloop.Comp * len(ordered))()
+        keep = []  # the ctypes arrays must outlive the loop
+        for c, s in zip(comps, ordered, strict=True):
+            in_vr = (ctypes.c_uint * max(1, len(s.inputs)))(*(s.fmu.vr(n) for n in s.inputs))
+            in_col = (ctypes.c_int * max(1, len(s.inputs)))(
+                *(offsets[ordered[j].name] + k for j, k in s.sources)
+            )
+            out_vr = (ctypes.c_uint * max(1, len(s.outputs)))(*(s.fmu.vr(n) for n in s.outputs))
+            keep += [in_vr, in_col, out_vr]
+            functions = s.fmu.slave._functions
+            c.component = s.fmu.slave.component
+            c.set_real = ctypes.cast(functions["fmi2SetReal"], ctypes.c_void_p).value
+            c.get_real = ctypes.cast(functions["fmi2GetReal"], ctypes.c_void_p).value
+            c.do_step = ctypes.cast(functions["fmi2DoStep"], ctypes.c_void_p).value
+            c.n_in, c.in_vr, c.in_col = len(s.inputs), in_vr, in_col
+            c.n_out, c.out_vr, c.out_col = len(s.outputs), out_vr, offsets[s.name]
+        assert data.flags["C_CONTIGUOUS"] and data.dtype == np.float64
+        jacobi = int(self.algorithm == "jacobi")
+
+        def steps(_ordered, _data, _names, first: int, count: int):
+            err = fastloop.LoopError()
+            done = lib.run_loop(comps, len(ordered), jacobi, self.start_time, self.step_size,
+                                first, count, self.divergence_limit,
+                                data.ctypes.data, data.shape[1], ctypes.byref(err))  # fmt: skip
+            _ = keep
+            if err.comp >= 0:
+                s = ordered[err.comp]
+                call = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")[err.call]
+                t = self.start_time + (first + done) * self.step_size
+                detail = "; ".join(s.fmu.errors()[-3:]) or "no message logged"
+                status = STATUS[err.status] if 0 <= err.status < len(STATUS) else err.status
+                return done, f"{s.name}: {call} at t={t} returned {status} ({detail})"
+            if err.column >= 0:
+                row = data[first + done]
+                return done, self._check_row(names, row, row[0])
+            return done, None
+
+        return steps
 
     def _initialize(self, ordered: list[_Slot]) -> None:
         for s in ordered:

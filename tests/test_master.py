@@ -228,3 +228,19 @@ def test_sampling_is_independent_of_the_master_step(ssp_path):
         ref = coarse[f"controller.tau{i}"][1:]  # sample k, recorded at (k + 1) * DT
         got = fine[f"controller.tau{i}"][1::10]  # ... and at k * DT + DT / 10
         assert np.abs(got - ref).max() < 1e-6 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_compiled_loop_equals_the_python_loop(ssp_path, algorithm):
+    """native/master/loop.c takes exactly the steps of the Python loop (and keeps the same rows
+    when a run diverges)."""
+    system = read_ssp(ssp_path)
+    runs = [
+        Master(system, algorithm=algorithm, stop_time=2.0, loop=k).run() for k in ("c", "python")
+    ]
+    assert runs[0].ok and np.array_equal(runs[0].data, runs[1].data)
+    bad = [
+        Master(system, overrides={"controller.G": 1e9}, stop_time=1.0, loop=k).run()
+        for k in ("c", "python")
+    ]
+    assert not bad[0].ok and np.array_equal(bad[0].data, bad[1].data)

@@ -151,7 +151,7 @@ class Arm:
 
     def forward_dynamics(self, q: Vec3, qd: Vec3, tau: Vec3) -> Vec3:
         """qdd = H^-1 (tau - C qd - F qd - g), eq. (5); tau is the net joint torque
-        (motor torque minus J^T F_ext). native/src/arm.c mirrors it operation for operation."""
+        (motor torque minus J^T F_ext). The native models mirror it operation for operation."""
         cqd = matvec(terms.coriolis(self.params, q, qd), qd)
         grav = terms.gravity(self.params, q)
         p = self.params

@@ -155,9 +155,16 @@ def c_sources(functions) -> tuple[str, str]:
         body += [sig, "{"]
         for par in used:
             body.append(f"    const double {par} = p->{par};")
-        body.append("    const double q1 = q[0], q2 = q[1], q3 = q[2];")
-        if "qd" in args:
-            body.append("    const double qd1 = qd[0], qd2 = qd[1], qd3 = qd[2];")
+        names = {s.name for e in list(expr) + [e for _, e in subs] for s in e.free_symbols}
+        for vec, k in (("q", 3), ("qd", 3)):
+            if vec in args:
+                used_here = [
+                    f"{vec}{i + 1} = {vec}[{i}]" for i in range(k) if f"{vec}{i + 1}" in names
+                ]
+                if used_here:
+                    body.append(f"    const double {', '.join(used_here)};")
+                else:
+                    body.append(f"    (void){vec};")
         for sym, e in subs:
             body.append(f"    const double {sym} = {ccode(e)};")
         if n == 1:

@@ -12,6 +12,7 @@ import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from impedance_cosim.system import ANNOTATION_TYPE, NS
 
@@ -59,7 +60,7 @@ class SystemDescription:
     algorithm: str | None = None
     order: list[str] = field(default_factory=list)
     folder: Path | None = None  # where the archive was extracted
-
+    _extracted: Any = field(default=None, repr=False)  # owns a temporary folder
     def component(self, name: str) -> Component:
         for c in self.components:
             if c.name == name:
@@ -146,7 +147,8 @@ def read_ssp(path: str | Path, extract_to: Path | None = None) -> SystemDescript
                 )
             components.append(Component(c.get("name"), c.get("source"), _connectors(c)))
             sets += _bindings(c, c.get("name") + ".", archive)
-        folder = extract_to or Path(tempfile.mkdtemp(prefix="impcosim_ssp_"))
+        keep = None if extract_to else tempfile.TemporaryDirectory(prefix="impcosim_ssp_")
+        folder = extract_to or Path(keep.name)  # removed with the SystemDescription
         archive.extractall(folder)
     for comp in components:
         comp.fmu = folder / comp.source
@@ -168,6 +170,7 @@ def read_ssp(path: str | Path, extract_to: Path | None = None) -> SystemDescript
         units=units,
         folder=folder,
     )
+    desc._extracted = keep
     for i, (name, params) in enumerate(sets):
         desc.parameter_sets[name or f"set{i + 1}"] = params
     exp = root.find("ssd:DefaultExperiment", NS)

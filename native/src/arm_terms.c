@@ -83,7 +83,7 @@ void arm_inertia(const ArmParams *p, const double q[3], double *out)
     const double Im1 = p->Im1;
     const double Im2 = p->Im2;
     const double Im3 = p->Im3;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
+    const double q2 = q[1], q3 = q[2];
     const double x0 = pow(a1, 2);
     const double x1 = a1*cos(q2);
     const double x2 = a2*m3;
@@ -115,7 +115,7 @@ void arm_coriolis(const ArmParams *p, const double q[3], const double qd[3], dou
     const double m3 = p->m3;
     const double rx2 = p->rx2;
     const double rx3 = p->rx3;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
+    const double q2 = q[1], q3 = q[2];
     const double qd1 = qd[0], qd2 = qd[1], qd3 = qd[2];
     const double x0 = a2*sin(q3);
     const double x1 = sin(q2 + q3);

@@ -61,6 +61,7 @@ class SystemDescription:
     order: list[str] = field(default_factory=list)
     folder: Path | None = None  # where the archive was extracted
     _extracted: Any = field(default=None, repr=False)  # owns a temporary folder
+
     def component(self, name: str) -> Component:
         for c in self.components:
             if c.name == name:

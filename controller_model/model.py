@@ -392,6 +392,8 @@ class ControllerModel(FmuModel):
         q, f, qd_meas = self._split(inputs)
         if not h > 0.0:
             raise ModelError(f"communication step must be > 0 (got {h})")
+        if h == math.inf:
+            raise ModelError("communication step must be finite (got inf)")
         if abs(t - self.t) > 1e-9 * max(1.0, abs(t)):
             raise ModelError(f"doStep at t={t}, but the controller is at t={self.t}")
         ts = self.ctrl.sample_period

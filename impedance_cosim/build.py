@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import os
 import shutil
 import tempfile
 import uuid
+import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,9 +128,122 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
         tmp_target.replace(target)
 
 
-def build_ssp(out_dir: Path = DEFAULT_OUT, name: str = "PaperScenario") -> Path:
-    """Pack ssp/ (SystemStructure.ssd, the scenario .ssv files) with the FMUs in out_dir into
-    out_dir/<name>.ssp, and validate it against the SSP 1.0 schemas."""
+NATIVE = REPO / "native"
+NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm_terms.c", "arm_terms.h", "ode.c",
+                 "ode.h", "pyrandom.c", "pyrandom.h")  # fmt: skip
+NATIVE_MODEL = ("config.h", "model.h", "model.c")
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+CFLAGS = [
+    "-std=c99",
+    "-O2",
+    "-fPIC",
+    "-ffp-contract=off",
+    "-fvisibility=hidden",
+    "-Wall",
+    "-Wextra",
+]
+
+
+def _native_sources(spec: FmuSpec) -> dict[str, bytes]:
+    """The C sources of a native FMU (flat: name -> content), FMI headers from fmpy included."""
+    import fmpy
+
+    files = {}
+    for name in NATIVE_SHARED:
+        path = NATIVE / "src" / name
+        if name.startswith(("ode", "pyrandom")) and spec.key != "plant":
+            continue
+        files[name] = path.read_bytes()
+    for name in NATIVE_MODEL:
+        files[name] = (NATIVE / spec.key / name).read_bytes()
+    headers = Path(fmpy.__file__).parent / "c-code"
+    for name in FMI_HEADERS:
+        files[name] = (headers / name).read_bytes()
+    return files
+
+
+def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> Path:
+    """Build the native (C99) flavour of an FMU with the machine's C compiler: the same variables
+    as the Python FMU, a binaries/linux64 library and its sources/ (with buildDescription.xml) so
+    tools can rebuild it for another platform."""
+    import platform
+    import subprocess
+
+    cls = spec.load_model_class()
+    sources = _native_sources(spec)
+    c_files = sorted(n for n in sources if n.endswith(".c"))
+
+    def xml(guid: str) -> bytes:
+        return model_description(
+            model_name=cls.MODEL_NAME,
+            description=cls.DESCRIPTION,
+            guid=guid,
+            variables=cls.variables(),
+            default_experiment=cls.DEFAULT_EXPERIMENT,
+            generation_tool=f"impedance_cosim {impedance_cosim.__version__} (native C99)",
+            output_dependencies=cls.OUTPUT_DEPENDENCIES,
+            source_files=c_files,
+        )
+
+    digest = hashlib.sha256(xml(""))
+    for name in sorted(sources):
+        digest.update(name.encode() + sources[name])
+    guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
+    sources["guid.h"] = f'#define MODEL_GUID "{guid}"\n'.encode()
+    sources["buildDescription.xml"] = _build_description(cls.MODEL_NAME, c_files)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="impcosim_native_") as tmp:
+        src = Path(tmp) / "sources"
+        src.mkdir()
+        for name, content in sources.items():
+            (src / name).write_bytes(content)
+        if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+            raise RuntimeError("the native build targets linux64 (x86_64) only")
+        lib = Path(tmp) / f"{cls.MODEL_NAME}.so"
+        cc = os.environ.get("CC", "gcc")
+        cmd = [cc, *CFLAGS, "-shared", f"-I{src}", *(str(src / f) for f in c_files), "-lm",
+               "-o", str(lib)]  # fmt: skip
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True)
+        except FileNotFoundError:
+            raise RuntimeError(f"C compiler {cc!r} not found (set CC)") from None
+        if done.returncode != 0:
+            raise RuntimeError(f"compiling {cls.MODEL_NAME} failed:\n{done.stderr}")
+        target = out_dir / f"{cls.MODEL_NAME}.fmu"
+        tmp_target = target.with_suffix(".fmu.tmp")
+        with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr(_info("modelDescription.xml"), xml(guid))
+            z.writestr(_info(f"binaries/linux64/{cls.MODEL_NAME}.so", 0o755), lib.read_bytes())
+            for name in sorted(sources):
+                z.writestr(_info(f"sources/{name}"), sources[name])
+        tmp_target.replace(target)
+    return target
+
+
+def _info(name: str, mode: int = 0o644) -> zipfile.ZipInfo:
+    info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = mode << 16
+    return info
+
+
+def _build_description(model_identifier: str, c_files: list[str]) -> bytes:
+    root = ET.Element("fmiBuildDescription", {"fmiVersion": "2.0"})
+    conf = ET.SubElement(root, "BuildConfiguration", {"modelIdentifier": model_identifier})
+    files = ET.SubElement(conf, "SourceFileSet", {"language": "C99"})
+    for name in c_files:
+        ET.SubElement(files, "SourceFile", {"name": name})
+    ET.SubElement(conf, "Library", {"name": "m"})
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def build_ssp(
+    out_dir: Path = DEFAULT_OUT, name: str = "PaperScenario", fmu_dir: Path | None = None
+) -> Path:
+    """Pack ssp/ (SystemStructure.ssd, the scenario .ssv files) with the FMUs in fmu_dir (default
+    out_dir) into out_dir/<name>.ssp, and validate it against the SSP 1.0 schemas."""
     from fmpy.ssp.ssd import read_ssd
 
     from impedance_cosim.system import COMPONENTS
@@ -142,7 +257,7 @@ def build_ssp(out_dir: Path = DEFAULT_OUT, name: str = "PaperScenario") -> Path:
         for ssv in sorted(source.glob("*.ssv")):
             z.write(ssv, f"resources/{ssv.name}")
         for comp in COMPONENTS:
-            fmu = out_dir / comp.fmu
+            fmu = Path(fmu_dir or out_dir) / comp.fmu
             if not fmu.is_file():
                 raise FileNotFoundError(f"{fmu} is missing: build the FMUs first")
             z.write(fmu, comp.source)
@@ -162,6 +277,8 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
     if unknown:
         raise ValueError(f"unknown FMU {unknown}; choose from {sorted(FMUS)}")
     built = [build_fmu(FMUS[k], out_dir) for k in keys]
+    built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in keys]
     if not only:
         built.append(build_ssp(out_dir))
+        built.append(build_ssp(out_dir, "PaperScenario-native", Path(out_dir) / "native"))
     return built

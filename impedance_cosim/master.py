@@ -242,6 +242,7 @@ class Master:
         n = int(round((self.stop_time - t0) / h))
         data = np.empty((n + 1, len(names)))
         rows, error = 0, None
+        info: dict[str, Any] = {}
         started = wallclock.perf_counter()
         bar = _Progress(n, h) if progress else None
         try:
@@ -253,12 +254,15 @@ class Master:
             if self.loop == "c" and fast is None:
                 raise MasterError("the C loop cannot be compiled here (no C compiler?)")
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
+            stepping = wallclock.perf_counter()
             while not error and rows < n + 1:
                 chunk = min(n + 1 - rows, CHUNK)
                 done, error = step(ordered, data, names, rows - 1, chunk)
                 rows += done
                 if bar:
                     bar.update(rows - 1)
+            info["stepping_s"] = wallclock.perf_counter() - stepping
+            info["loop"] = "c" if fast else "python"
         except (FmuError, SspError, ValueError, KeyError) as exc:
             error = str(exc)
         finally:
@@ -278,6 +282,7 @@ class Master:
             parameter_set=self.parameter_set,
             error=error,
             wall_time=wallclock.perf_counter() - started,
+            info=info,
         )
 
     def _python_steps(self, ordered, data, names, first: int, count: int):

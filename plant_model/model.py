@@ -97,7 +97,10 @@ class PlantModel(FmuModel):
         self.in_contact = contact_event(self.wall, x, xd, False) > 0.0
         self.h = H0
         self.rng = random.Random(s.noise_seed)
-        self.q_meas = self._measure(q)
+        try:
+            self.q_meas = self._measure(q)
+        except (OverflowError, ValueError) as exc:
+            raise ModelError(f"joint angle measurement failed: {exc}") from None
 
     # --- equations ----------------------------------------------------------------------------
 
@@ -156,6 +159,8 @@ class PlantModel(FmuModel):
         check_finite_inputs(INPUTS, inputs)
         if not h > 0.0:
             raise ModelError(f"communication step must be > 0 (got {h})")
+        if h == math.inf:
+            raise ModelError("communication step must be finite (got inf)")
         if abs(t - self.t) > 1e-9 * max(1.0, abs(t)):
             raise ModelError(f"doStep at t={t}, but the plant is at t={self.t}")
         t_end = t + h
@@ -172,11 +177,15 @@ class PlantModel(FmuModel):
                 mode, switches = not mode, switches + 1
                 if switches > 1000:
                     raise IntegrationError("contact chattering: more than 1000 switches in a step")
-        except (IntegrationError, ZeroDivisionError, OverflowError) as exc:
+        except (IntegrationError, ZeroDivisionError, OverflowError, ValueError) as exc:
             raise ModelError(f"plant integration failed: {exc}") from None
+        try:
+            q_meas = self._measure(y[:3])
+        except (OverflowError, ValueError) as exc:
+            raise ModelError(f"joint angle measurement failed: {exc}") from None
         self.t, self.q, self.qd = t_end, y[:3], y[3:]
         self.in_contact, self.h = mode, hh
-        self.q_meas = self._measure(self.q)
+        self.q_meas = q_meas
 
     def outputs(self) -> tuple:
         q, qd = self.q, self.qd

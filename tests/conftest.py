@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.build import FMUS, build_fmu, build_ssp
+from impedance_cosim.build import FMUS, build_fmu, build_native_fmu, build_ssp
 from impedance_cosim.linalg3 import matvec
 from plant_model.model import PlantModel
 
@@ -27,6 +27,16 @@ def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def ssp_path(fmu_dir: Path) -> Path:
     """The paper's system archive, built from this checkout."""
     return fmu_dir / "PaperScenario.ssp"
+
+
+@pytest.fixture(scope="session")
+def native_dir(fmu_dir: Path) -> Path:
+    """The native FMUs (compiled with the machine's C compiler) and their system archive."""
+    out = fmu_dir / "native"
+    for spec in FMUS.values():
+        build_native_fmu(spec, out)
+    build_ssp(fmu_dir, "PaperScenario-native", out)
+    return out
 
 
 def output_dict(model) -> dict[str, float]:

@@ -1,17 +1,24 @@
-"""The generated arm terms (Python and C) are the committed output of the symbolic derivation."""
+"""Generated sources are the committed output of their generators (one source of truth)."""
 
 from __future__ import annotations
 
 import pytest
 
-pytest.importorskip("sympy")
-
-from impedance_cosim.derivation import generate  # noqa: E402
+from impedance_cosim.fmi import cgen
 
 
-def test_generated_files_are_up_to_date():
-    """Regenerating from impedance_cosim/derivation.py gives the committed files byte for byte."""
+def test_arm_terms_are_up_to_date():
+    """impedance_cosim/arm_terms.py and native/src/arm_terms.{c,h} regenerate byte for byte from
+    the symbolic derivation (python -m impedance_cosim.derivation)."""
+    pytest.importorskip("sympy")
+    from impedance_cosim.derivation import generate
+
     for path, content in generate().items():
-        assert path.read_text() == content, (
-            f"{path.name} is stale: python -m impedance_cosim.derivation"
-        )
+        assert path.read_text() == content, f"{path.name} is stale"
+
+
+def test_native_configs_are_up_to_date():
+    """native/<model>/config.h regenerate from the variable tables the Python FMUs use
+    (python -m impedance_cosim.fmi.cgen)."""
+    for path, content in cgen.generate().items():
+        assert path.read_text() == content, f"{path} is stale"

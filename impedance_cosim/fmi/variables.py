@@ -121,6 +121,7 @@ def model_description(
     generation_tool: str,
     output_dependencies: str | None = None,
     needs_execution_tool: bool = False,
+    source_files: list[str] | None = None,
 ) -> bytes:
     """Complete FMI 2.0 co-simulation modelDescription.xml for a model's variable table.
 
@@ -138,7 +139,7 @@ def model_description(
             "numberOfEventIndicators": "0",
         },
     )
-    ET.SubElement(
+    cosim = ET.SubElement(
         root,
         "CoSimulation",
         {
@@ -152,6 +153,10 @@ def model_description(
             "canSerializeFMUstate": "true",
         },
     )
+    if source_files:
+        files = ET.SubElement(cosim, "SourceFiles")
+        for name in source_files:
+            ET.SubElement(files, "File", {"name": name})
     used = sorted({v.unit for v in variables if v.unit})
     unknown = [u for u in used if u not in UNITS]
     if unknown:

@@ -1,0 +1,501 @@
+/* The native ImpedanceController: reduced-order velocity observer (eq. 9) + impedance law
+ * (eq. 10), sampled at sample_period with its outputs held between samples.
+ *
+ * A transcription of controller_model/model.py (and of Arm.forward_dynamics, jacobian_det and
+ * friction in impedance_cosim/arm.py), operation for operation: the same temporaries, the same
+ * order of terms and the same parenthesisation as Python's left-to-right evaluation, the same libm
+ * calls, so that with -ffp-contract=off (no fused multiply-add) and without -ffast-math it computes
+ * the same numbers as the Python FMU, bit for bit. Error messages are the Python ones, floats
+ * formatted like Python's repr. Read the Python first; the comments here only note departures.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "arm_terms.h"
+#include "glue.h"
+#include "linalg3.h"
+
+#define PI 3.141592653589793 /* math.pi */
+#define TWO_PI (2.0 * PI)
+#define SINGULAR_TOL 1e-6 /* |det J| below SINGULAR_TOL * a1 * a2 is singular */
+#define TIME_TOL 1e-9     /* sample-time comparisons, relative to the sample period */
+#define N_OUTPUTS 24      /* VR_tau1 .. VR_e_phi, contiguous and in ControllerModel's order */
+
+static const char *const VELOCITY_SOURCES[3] = {"observer", "difference", "measured"};
+
+typedef struct {
+    ArmParams arm; /* the controller's own model of the arm */
+    double traj_cx, traj_cy, traj_ax, traj_ay, traj_f, traj_phi, wall_x, wall_depth;
+    double K[3], G[3], B[3], yhat0[3], tau_max[3];
+    double ts;
+    int limit_torque;
+} Params;
+
+static void read_params(const Data *d, Params *p)
+{
+    const double *r = d->r;
+    p->arm.a1 = r[VR_a1];
+    p->arm.a2 = r[VR_a2];
+    p->arm.a3 = r[VR_a3];
+    p->arm.m1 = r[VR_m1];
+    p->arm.m2 = r[VR_m2];
+    p->arm.m3 = r[VR_m3];
+    p->arm.rx1 = r[VR_rx1];
+    p->arm.ry1 = r[VR_ry1];
+    p->arm.rx2 = r[VR_rx2];
+    p->arm.rx3 = r[VR_rx3];
+    p->arm.Iu1 = r[VR_Iu1];
+    p->arm.Iu2 = r[VR_Iu2];
+    p->arm.Iu3 = r[VR_Iu3];
+    p->arm.Im1 = r[VR_Im1];
+    p->arm.Im2 = r[VR_Im2];
+    p->arm.Im3 = r[VR_Im3];
+    p->arm.f1 = r[VR_f1];
+    p->arm.f2 = r[VR_f2];
+    p->arm.f3 = r[VR_f3];
+    p->arm.g = r[VR_g];
+    p->traj_cx = r[VR_traj_cx];
+    p->traj_cy = r[VR_traj_cy];
+    p->traj_ax = r[VR_traj_ax];
+    p->traj_ay = r[VR_traj_ay];
+    p->traj_f = r[VR_traj_f];
+    p->traj_phi = r[VR_traj_phi];
+    p->wall_x = r[VR_wall_x];
+    p->wall_depth = r[VR_wall_depth];
+    p->K[0] = r[VR_K1];
+    p->K[1] = r[VR_K2];
+    p->K[2] = r[VR_K3];
+    p->G[0] = r[VR_G1];
+    p->G[1] = r[VR_G2];
+    p->G[2] = r[VR_G3];
+    p->B[0] = r[VR_B1];
+    p->B[1] = r[VR_B2];
+    p->B[2] = r[VR_B3];
+    p->yhat0[0] = r[VR_yhat0_1];
+    p->yhat0[1] = r[VR_yhat0_2];
+    p->yhat0[2] = r[VR_yhat0_3];
+    p->tau_max[0] = r[VR_tau_max1];
+    p->tau_max[1] = r[VR_tau_max2];
+    p->tau_max[2] = r[VR_tau_max3];
+    p->ts = r[VR_sample_period];
+    p->limit_torque = d->i[VR_limit_torque] != 0;
+}
+
+/* --- messages: Python's repr of a float and of a str ------------------------------------------ */
+
+/* repr(x): the shortest digits that round-trip, fixed notation for 1e-4 <= |x| < 1e16 (with a
+ * ".0" when integral), else d.ddde+XX. */
+static void float_repr(double x, char *buf, size_t size)
+{
+    char tmp[40], digits[24];
+    const char *c;
+    int nd = 0, exp10, decpt, p, k;
+    size_t n = 0;
+    if (isnan(x)) {
+        snprintf(buf, size, "nan");
+        return;
+    }
+    if (isinf(x)) {
+        snprintf(buf, size, x < 0.0 ? "-inf" : "inf");
+        return;
+    }
+    for (p = 1; p < 17; p++) {
+        snprintf(tmp, sizeof tmp, "%.*e", p - 1, x);
+        if (strtod(tmp, NULL) == x) {
+            break;
+        }
+    }
+    snprintf(tmp, sizeof tmp, "%.*e", p - 1, x); /* [-]d[.ddd]e(+|-)XX */
+    c = tmp;
+    if (*c == '-') {
+        c++;
+    }
+    for (; *c != 'e'; c++) {
+        if (*c != '.') {
+            digits[nd++] = *c;
+        }
+    }
+    exp10 = atoi(c + 1);
+    while (nd > 1 && digits[nd - 1] == '0') {
+        nd--;
+    }
+    digits[nd] = '\0';
+    decpt = exp10 + 1; /* x = 0.digits * 10^decpt */
+    char out[64];
+    if (tmp[0] == '-') {
+        out[n++] = '-';
+    }
+    if (decpt <= -4 || decpt > 16) {
+        out[n++] = digits[0];
+        if (nd > 1) {
+            out[n++] = '.';
+            for (k = 1; k < nd; k++) {
+                out[n++] = digits[k];
+            }
+        }
+        snprintf(out + n, sizeof out - n, "e%c%02d", exp10 < 0 ? '-' : '+', abs(exp10));
+    } else if (decpt <= 0) {
+        out[n++] = '0';
+        out[n++] = '.';
+        for (k = 0; k < -decpt; k++) {
+            out[n++] = '0';
+        }
+        for (k = 0; k < nd; k++) {
+            out[n++] = digits[k];
+        }
+        out[n] = '\0';
+    } else {
+        for (k = 0; k < nd || k < decpt; k++) {
+            if (k == decpt) {
+                out[n++] = '.';
+            }
+            out[n++] = k < nd ? digits[k] : '0';
+        }
+        if (nd <= decpt) {
+            out[n++] = '.';
+            out[n++] = '0';
+        }
+        out[n] = '\0';
+    }
+    snprintf(buf, size, "%s", out);
+}
+
+/* repr(s) of a str (ASCII escapes; other bytes copied as they are) */
+static void str_repr(const char *s, char *buf, size_t size)
+{
+    char out[4 * STRING_MAX + 3];
+    size_t n = 0, k, len = 0;
+    char quote;
+    while (len < STRING_MAX && s[len]) {
+        len++;
+    }
+    quote = memchr(s, '\'', len) && !memchr(s, '"', len) ? '"' : '\'';
+    out[n++] = quote;
+    for (k = 0; k < len; k++) {
+        const unsigned char ch = (unsigned char)s[k];
+        if (ch == (unsigned char)quote || ch == '\\') {
+            out[n++] = '\\';
+            out[n++] = (char)ch;
+        } else if (ch == '\n' || ch == '\r' || ch == '\t') {
+            out[n++] = '\\';
+            out[n++] = ch == '\n' ? 'n' : ch == '\r' ? 'r' : 't';
+        } else if (ch < 0x20 || ch == 0x7f) {
+            n += (size_t)sprintf(out + n, "\\x%02x", ch);
+        } else {
+            out[n++] = (char)ch;
+        }
+    }
+    out[n++] = quote;
+    out[n] = '\0';
+    snprintf(buf, size, "%s", out);
+}
+
+/* --- arm: Arm.forward_dynamics, jacobian_det, friction -------------------------------------- */
+
+static int forward_dynamics(const ArmParams *p, const double q[3], const double qd[3],
+                            const double tau[3], double qdd[3])
+{
+    double c[9], cqd[3], grav[3], rhs[3], h[9];
+    arm_coriolis(p, q, qd, c);
+    matvec(c, qd, cqd);
+    arm_gravity(p, q, grav);
+    rhs[0] = tau[0] - cqd[0] - p->f1 * qd[0] - grav[0];
+    rhs[1] = tau[1] - cqd[1] - p->f2 * qd[1] - grav[1];
+    rhs[2] = tau[2] - cqd[2] - p->f3 * qd[2] - grav[2];
+    arm_inertia(p, q, h);
+    return solve3(h, rhs, qdd);
+}
+
+static double jacobian_det(const ArmParams *p, const double q[3])
+{
+    return p->a1 * p->a2 * sin(q[1]);
+}
+
+/* --- virtual trajectory, observer, impedance law --------------------------------------------- */
+
+static void virtual_trajectory(const Params *p, double t, double xv[3], double xv_dot[3],
+                               double xv_ddot[3])
+{
+    const double w = TWO_PI * p->traj_f;
+    const double theta = w * t - 0.5 * PI;
+    const double s = sin(theta), c = cos(theta);
+    const double x = p->traj_cx + p->traj_ax * s;
+    const double y = p->traj_cy + p->traj_ay * c;
+    const double yd = -p->traj_ay * w * s;
+    const double ydd = -p->traj_ay * w * w * c;
+    xv[1] = y;
+    xv[2] = p->traj_phi;
+    xv_dot[1] = yd;
+    xv_dot[2] = 0.0;
+    xv_ddot[1] = ydd;
+    xv_ddot[2] = 0.0;
+    if (x >= p->wall_x) { /* in contact: the target lies wall_depth inside the wall */
+        xv[0] = p->wall_x + p->wall_depth;
+        xv_dot[0] = 0.0;
+        xv_ddot[0] = 0.0;
+        return;
+    }
+    xv[0] = x;
+    xv_dot[0] = p->traj_ax * w * c;
+    xv_ddot[0] = -p->traj_ax * w * w * s;
+}
+
+static int observer_update(const Params *p, const double yhat_prev[3], const double q_prev[3],
+                           const double q_now[3], const double tau_prev[3], const double f_prev[3],
+                           double dt, double yhat[3], char *msg)
+{
+    const double *K = p->K;
+    double j[9], jtf[3], net[3], acc[3];
+    int i;
+    arm_jacobian(&p->arm, q_prev, j);
+    matTvec(j, f_prev, jtf);
+    net[0] = tau_prev[0] - jtf[0];
+    net[1] = tau_prev[1] - jtf[1];
+    net[2] = tau_prev[2] - jtf[2];
+    if (forward_dynamics(&p->arm, q_prev, yhat_prev, net, acc)) {
+        /* Python: ZeroDivisionError in linalg3.solve */
+        return fail(msg, "the inertia matrix of the controller's arm model is singular");
+    }
+    for (i = 0; i < 3; i++) {
+        yhat[i] = yhat_prev[i] + K[i] * (q_now[i] - q_prev[i]) + dt * acc[i] -
+                  dt * K[i] * yhat_prev[i];
+    }
+    return 0;
+}
+
+static double wrap_angle(double a)
+{
+    const double w = remainder(a, TWO_PI); /* exact, like math.remainder */
+    return w <= -PI ? w + TWO_PI : w;
+}
+
+static int impedance_terms(const Params *p, const double q[3], const double yhat[3],
+                           const double f_au[3], const double xv[3], const double xv_dot[3],
+                           const double xv_ddot[3], double tau[3], double e[3],
+                           double xd_hat[3], char *msg)
+{
+    const ArmParams *arm = &p->arm;
+    const double *G = p->G, *B = p->B;
+    const double det = jacobian_det(arm, q);
+    double j[9], qd_v[3], jdot[9], jdot_qd[3], rhs[3], qdd_v[3], pose[3], f_c[3], jtf[3];
+    double h[9], hq[3], c[9], cq[3], fq[3], g[3];
+    if (!(fabs(det) >= SINGULAR_TOL * arm->a1 * arm->a2)) {
+        return fail(msg,
+                    "the Jacobian is singular at q = (%.6g, %.6g, %.6g) rad"
+                    " (det J = a1 a2 sin q2 = %.3g): the impedance law needs J^-1",
+                    q[0], q[1], q[2], det);
+    }
+    arm_jacobian(arm, q, j);
+    if (solve3(j, xv_dot, qd_v)) { /* Python: ZeroDivisionError in linalg3.solve */
+        return fail(msg, "the Jacobian is singular (det = 0) at q = (%.6g, %.6g, %.6g) rad", q[0],
+                    q[1], q[2]);
+    }
+    arm_jacobian_dot(arm, q, yhat, jdot);
+    matvec(jdot, qd_v, jdot_qd);
+    rhs[0] = xv_ddot[0] - jdot_qd[0];
+    rhs[1] = xv_ddot[1] - jdot_qd[1];
+    rhs[2] = xv_ddot[2] - jdot_qd[2];
+    if (solve3(j, rhs, qdd_v)) { /* same matrix as above: cannot happen */
+        return fail(msg, "the Jacobian is singular (det = 0)");
+    }
+    arm_kinematics(arm, q, pose);
+    e[0] = pose[0] - xv[0];
+    e[1] = pose[1] - xv[1];
+    e[2] = wrap_angle(pose[2] - xv[2]);
+    matvec(j, yhat, xd_hat);
+    f_c[0] = f_au[0] - B[0] * (xd_hat[0] - xv_dot[0]) - G[0] * e[0];
+    f_c[1] = f_au[1] - B[1] * (xd_hat[1] - xv_dot[1]) - G[1] * e[1];
+    f_c[2] = f_au[2] - B[2] * (xd_hat[2] - xv_dot[2]) - G[2] * e[2];
+    matTvec(j, f_c, jtf);
+    arm_inertia(arm, q, h);
+    matvec(h, qdd_v, hq);
+    arm_coriolis(arm, q, yhat, c);
+    matvec(c, qd_v, cq);
+    fq[0] = arm->f1 * qd_v[0]; /* Arm.friction */
+    fq[1] = arm->f2 * qd_v[1];
+    fq[2] = arm->f3 * qd_v[2];
+    arm_gravity(arm, q, g);
+    tau[0] = hq[0] + cq[0] + fq[0] + g[0] + jtf[0];
+    tau[1] = hq[1] + cq[1] + fq[1] + g[1] + jtf[1];
+    tau[2] = hq[2] + cq[2] + fq[2] + g[2] + jtf[2];
+    return 0;
+}
+
+/* --- the model ------------------------------------------------------------------------------- */
+
+/* ControllerModel._split: the inputs, after checking they are finite (qd_meas only when used). */
+static int split_inputs(const Data *d, double q[3], double f[3], double qd_meas[3], char *msg)
+{
+    const int n = d->m.velocity_source == SOURCE_MEASURED ? 9 : 6;
+    int k;
+    for (k = 0; k < n; k++) {
+        const double v = d->r[VR_q1 + k];
+        if (!(v - v == 0.0)) { /* false for NaN and +-inf */
+            char buf[32];
+            float_repr(v, buf, sizeof buf);
+            return fail(msg, "input %s is not finite (%s)", VARS[VR_q1 + k].name, buf);
+        }
+    }
+    for (k = 0; k < 3; k++) {
+        q[k] = d->r[VR_q1 + k];
+        f[k] = d->r[VR_fx + k];
+        qd_meas[k] = d->r[VR_qd_meas1 + k];
+    }
+    return 0;
+}
+
+/* ControllerModel._sample: sample k from the state in d->m (the previous sample's) and this
+ * sample's inputs; on success, updates d->m and writes the outputs to d->r. */
+static int take_sample(Data *d, const Params *p, int64_t k, const double q[3], const double f[3],
+                       const double qd_meas[3], char *msg)
+{
+    ModelState *m = &d->m;
+    const double ts = p->ts;
+    double yhat[3], qd_diff[3], xv[3], xv_dot[3], xv_ddot[3], tau[3], e[3], xd_hat[3];
+    const double *qd_hat;
+    double *out = &d->r[VR_tau1];
+    int i;
+    if (k == 0) {
+        for (i = 0; i < 3; i++) {
+            yhat[i] = qd_diff[i] = p->yhat0[i];
+        }
+    } else {
+        if (observer_update(p, m->yhat, m->q_prev, q, m->tau_prev, m->f_prev, ts, yhat, msg)) {
+            return 1;
+        }
+        for (i = 0; i < 3; i++) {
+            qd_diff[i] = (q[i] - m->q_prev[i]) / ts;
+        }
+    }
+    qd_hat = m->velocity_source == SOURCE_OBSERVER     ? yhat
+             : m->velocity_source == SOURCE_DIFFERENCE ? qd_diff
+                                                       : qd_meas;
+    virtual_trajectory(p, m->start_time + (double)k * ts, xv, xv_dot, xv_ddot);
+    if (impedance_terms(p, q, qd_hat, f, xv, xv_dot, xv_ddot, tau, e, xd_hat, msg)) {
+        return 1;
+    }
+    if (p->limit_torque) {
+        for (i = 0; i < 3; i++) { /* min(m, max(-m, tau)), with Python's min/max on ties/NaN */
+            const double hi = p->tau_max[i], lo = -p->tau_max[i];
+            const double clipped = tau[i] > lo ? tau[i] : lo;
+            tau[i] = clipped < hi ? clipped : hi;
+        }
+    }
+    for (i = 0; i < 3; i++) {
+        out[0 + i] = tau[i];
+        out[3 + i] = qd_hat[i];
+        out[6 + i] = yhat[i];
+        out[9 + i] = qd_diff[i];
+        out[12 + i] = xd_hat[i];
+        out[15 + i] = xv[i];
+        out[18 + i] = xv_dot[i];
+        out[21 + i] = e[i];
+        m->yhat[i] = yhat[i];
+        m->q_prev[i] = q[i];
+        m->tau_prev[i] = tau[i];
+        m->f_prev[i] = f[i];
+    }
+    return 0;
+}
+
+int model_initialize(Data *d, char *msg)
+{
+    /* ControllerParams.POSITIVE */
+    static const int positive[] = {VR_K1, VR_K2, VR_K3, VR_G1, VR_G2, VR_G3, VR_B1, VR_B2, VR_B3,
+                                   VR_sample_period, VR_tau_max1, VR_tau_max2, VR_tau_max3};
+    ModelState *m = &d->m;
+    Params p;
+    double q[3], f[3], qd_meas[3];
+    char buf[2][32];
+    const char *source = d->s[VR_velocity_source];
+    size_t k;
+    int found = -1;
+    read_params(d, &p);
+    /* ArmParams.validate (the glue has checked finiteness and minimums) */
+    if (p.arm.a1 <= 0.0 || p.arm.a2 <= 0.0) {
+        float_repr(p.arm.a1, buf[0], sizeof buf[0]);
+        float_repr(p.arm.a2, buf[1], sizeof buf[1]);
+        return fail(msg, "link lengths a1, a2 must be > 0 (got a1=%s, a2=%s)", buf[0], buf[1]);
+    }
+    /* ControllerParams.validate */
+    for (k = 0; k < sizeof positive / sizeof positive[0]; k++) {
+        const double value = d->r[positive[k]];
+        if (isfinite(value) && !(value > 0.0)) {
+            float_repr(value, buf[0], sizeof buf[0]);
+            return fail(msg, "parameter %s must be > 0 (got %s)", VARS[positive[k]].name, buf[0]);
+        }
+    }
+    for (k = 0; k < 3; k++) {
+        if (strncmp(source, VELOCITY_SOURCES[k], STRING_MAX) == 0) {
+            found = (int)k;
+        }
+    }
+    if (found < 0) {
+        char text[4 * STRING_MAX + 3];
+        str_repr(source, text, sizeof text);
+        return fail(msg,
+                    "parameter velocity_source must be one of %s, %s, %s (got %s)",
+                    VELOCITY_SOURCES[0], VELOCITY_SOURCES[1], VELOCITY_SOURCES[2], text);
+    }
+    memset(m, 0, sizeof *m);
+    m->velocity_source = found;
+    m->start_time = d->start_time;
+    if (split_inputs(d, q, f, qd_meas, msg)) {
+        return 1;
+    }
+    /* Sample 0, from the inputs at initialization (previous sample: zeros, unused at k = 0) */
+    if (take_sample(d, &p, 0, q, f, qd_meas, msg)) {
+        return 1;
+    }
+    m->t = m->start_time;
+    m->k_next = 1;
+    m->held_input_samples = 0;
+    return 0;
+}
+
+int model_step(Data *d, double t, double h, char *msg)
+{
+    ModelState *m = &d->m;
+    Params p;
+    double q[3], f[3], qd_meas[3], tol, t_end;
+    int64_t k, held = 0;
+    char buf[2][32];
+    read_params(d, &p);
+    if (split_inputs(d, q, f, qd_meas, msg)) {
+        return 1;
+    }
+    if (!(h > 0.0)) {
+        float_repr(h, buf[0], sizeof buf[0]);
+        return fail(msg, "communication step must be > 0 (got %s)", buf[0]);
+    }
+    if (isinf(h)) {
+        return fail(msg, "communication step must be finite (got inf)");
+    }
+    {
+        const double at = fabs(t);
+        const double scale = at > 1.0 ? at : 1.0; /* max(1.0, abs(t)) */
+        if (fabs(t - m->t) > 1e-9 * scale) {
+            float_repr(t, buf[0], sizeof buf[0]);
+            float_repr(m->t, buf[1], sizeof buf[1]);
+            return fail(msg, "doStep at t=%s, but the controller is at t=%s", buf[0], buf[1]);
+        }
+    }
+    tol = TIME_TOL * p.ts;
+    t_end = t + h;
+    /* every unprocessed sample t_k < t + h, all on the inputs given at t (the glue discards d
+     * when this fails, so the state may be updated sample by sample) */
+    for (k = m->k_next; m->start_time + (double)k * p.ts < t_end - tol; k++) {
+        if (m->start_time + (double)k * p.ts > t + tol) {
+            held += 1; /* strictly inside the step: the inputs at t are reused */
+        }
+        if (take_sample(d, &p, k, q, f, qd_meas, msg)) {
+            return 1;
+        }
+    }
+    m->k_next = k;
+    m->held_input_samples += held;
+    m->t = t_end;
+    return 0;
+}

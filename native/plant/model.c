@@ -1,0 +1,416 @@
+/* The native PumaPlant: plant_model/model.py (PlantModel) transcribed operation for operation,
+ * with impedance_cosim/arm.py (inverse_kinematics, forward_dynamics) and impedance_cosim/wall.py,
+ * so that it computes the same numbers as the Python FMU, bit for bit.
+ *
+ * Each doStep integrates eq. (1) with the torque held, using adaptive Dormand-Prince 5(4)
+ * (ode.c) and stopping exactly where the contact closes or opens; the contact mode switches there
+ * and the integration continues. Joint angles are measured with CPython's random.gauss noise
+ * (pyrandom.c) and quantized like Python's round(). */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "arm_terms.h"
+#include "glue.h"
+#include "linalg3.h"
+#include "ode.h"
+#include "pyrandom.h"
+
+#define H0 1e-3            /* s, the integrator's first step guess */
+#define MAX_SWITCHES 1000  /* contact mode switches per communication step */
+#define REPR 40            /* buffer size for py_float_repr */
+
+/* What the right-hand side and the event function need (PlantModel._rhs / _event closures). */
+typedef struct {
+    ArmParams arm;
+    double wall_x, wall_k, wall_d;
+    double tau[3];
+    int in_contact;
+} PlantCtx;
+
+static void read_arm(const Data *d, ArmParams *p)
+{
+    p->a1 = d->r[VR_a1];
+    p->a2 = d->r[VR_a2];
+    p->a3 = d->r[VR_a3];
+    p->m1 = d->r[VR_m1];
+    p->m2 = d->r[VR_m2];
+    p->m3 = d->r[VR_m3];
+    p->rx1 = d->r[VR_rx1];
+    p->ry1 = d->r[VR_ry1];
+    p->rx2 = d->r[VR_rx2];
+    p->rx3 = d->r[VR_rx3];
+    p->Iu1 = d->r[VR_Iu1];
+    p->Iu2 = d->r[VR_Iu2];
+    p->Iu3 = d->r[VR_Iu3];
+    p->Im1 = d->r[VR_Im1];
+    p->Im2 = d->r[VR_Im2];
+    p->Im3 = d->r[VR_Im3];
+    p->f1 = d->r[VR_f1];
+    p->f2 = d->r[VR_f2];
+    p->f3 = d->r[VR_f3];
+    p->g = d->r[VR_g];
+}
+
+static void read_ctx(const Data *d, PlantCtx *c)
+{
+    read_arm(d, &c->arm);
+    c->wall_x = d->r[VR_wall_x];
+    c->wall_k = d->r[VR_wall_k];
+    c->wall_d = d->r[VR_wall_d];
+    c->tau[0] = d->r[VR_tau1];
+    c->tau[1] = d->r[VR_tau2];
+    c->tau[2] = d->r[VR_tau3];
+    c->in_contact = d->m.in_contact;
+}
+
+/* Python's math.sin / math.cos raise ValueError("math domain error") for an infinite argument,
+ * where C returns NaN: report it the same way (it ends the step, as in Python). */
+static int domain_error(char *err)
+{
+    snprintf(err, ODE_MSG_MAX, "math domain error");
+    return 1;
+}
+
+/* Every sin/cos argument of arm_terms' coriolis, gravity, inertia and jacobian and of ee_x. */
+static int angles_infinite(const double q[3])
+{
+    const double q12 = q[0] + q[1];
+    return isinf(q[0]) || isinf(q[1]) || isinf(q[2]) || isinf(q12) || isinf(q12 + q[2])
+           || isinf(q[1] + q[2]);
+}
+
+/* --- wall.py --------------------------------------------------------------------------------- */
+
+static double wall_force(const PlantCtx *c, double x, double xd)
+{
+    const double pen = x - c->wall_x;
+    double force;
+    if (pen <= 0.0) {
+        return 0.0;
+    }
+    force = c->wall_k * pen + c->wall_d * xd;
+    return force > 0.0 ? force : 0.0;
+}
+
+static double contact_force_law(const PlantCtx *c, double x, double xd)
+{
+    return c->wall_k * (x - c->wall_x) + c->wall_d * xd;
+}
+
+static double contact_event(const PlantCtx *c, double x, double xd, int in_contact)
+{
+    const double force = contact_force_law(c, x, xd);
+    const double closing = c->wall_k * (x - c->wall_x);
+    if (in_contact) {
+        return -force;
+    }
+    return force < closing ? force : closing; /* Python min(closing, force) */
+}
+
+/* --- PlantModel equations -------------------------------------------------------------------- */
+
+/* PlantModel._ee_x: end-effector x and x-velocity (all the wall needs). */
+static int ee_x(const ArmParams *a, const double q[3], const double qd[3], double *x, double *xd,
+                char *err)
+{
+    const double q12 = q[0] + q[1];
+    const double q123 = q12 + q[2];
+    double s1, s12, s123;
+    if (isinf(q[0]) || isinf(q12) || isinf(q123)) {
+        return domain_error(err);
+    }
+    s1 = a->a1 * sin(q[0]);
+    s12 = a->a2 * sin(q12);
+    s123 = a->a3 * sin(q123);
+    *x = a->a1 * cos(q[0]) + a->a2 * cos(q12) + a->a3 * cos(q123);
+    *xd = -(s1 + s12 + s123) * qd[0] - (s12 + s123) * qd[1] - s123 * qd[2];
+    return 0;
+}
+
+/* Arm.forward_dynamics: qdd = H^-1 (tau - C qd - F qd - g); a singular H is Python's
+ * ZeroDivisionError. */
+static int forward_dynamics(const ArmParams *p, const double q[3], const double qd[3],
+                            const double tau[3], double qdd[3], char *err)
+{
+    double c[9], cqd[3], grav[3], hm[9], rhs[3];
+    arm_coriolis(p, q, qd, c);
+    matvec(c, qd, cqd);
+    arm_gravity(p, q, grav);
+    rhs[0] = tau[0] - cqd[0] - p->f1 * qd[0] - grav[0];
+    rhs[1] = tau[1] - cqd[1] - p->f2 * qd[1] - grav[1];
+    rhs[2] = tau[2] - cqd[2] - p->f3 * qd[2] - grav[2];
+    arm_inertia(p, q, hm);
+    if (solve3(hm, rhs, qdd)) {
+        snprintf(err, ODE_MSG_MAX, "float division by zero");
+        return 1;
+    }
+    return 0;
+}
+
+/* PlantModel._rhs(tau, in_contact): y' = f(y) for y = (q, qd), eq. (1). */
+static int plant_rhs(void *ctx, const double y[ODE_N], double out[ODE_N], char *err)
+{
+    const PlantCtx *c = (const PlantCtx *)ctx;
+    const double q[3] = {y[0], y[1], y[2]};
+    const double qd[3] = {y[3], y[4], y[5]};
+    double net[3], qdd[3];
+    if (angles_infinite(q)) {
+        return domain_error(err);
+    }
+    if (c->in_contact) {
+        double x, xd, fx, j[9];
+        if (ee_x(&c->arm, q, qd, &x, &xd, err)) {
+            return 1;
+        }
+        fx = contact_force_law(c, x, xd);
+        arm_jacobian(&c->arm, q, j); /* J^T (fx, 0, 0) = fx * first row of J */
+        net[0] = c->tau[0] - fx * j[0];
+        net[1] = c->tau[1] - fx * j[1];
+        net[2] = c->tau[2] - fx * j[2];
+    } else {
+        net[0] = c->tau[0];
+        net[1] = c->tau[1];
+        net[2] = c->tau[2];
+    }
+    if (forward_dynamics(&c->arm, q, qd, net, qdd, err)) {
+        return 1;
+    }
+    out[0] = qd[0];
+    out[1] = qd[1];
+    out[2] = qd[2];
+    out[3] = qdd[0];
+    out[4] = qdd[1];
+    out[5] = qdd[2];
+    return 0;
+}
+
+/* PlantModel._event(in_contact) */
+static int plant_event(void *ctx, const double y[ODE_N], double *g, char *err)
+{
+    const PlantCtx *c = (const PlantCtx *)ctx;
+    double x, xd;
+    if (ee_x(&c->arm, y, y + 3, &x, &xd, err)) {
+        return 1;
+    }
+    *g = contact_event(c, x, xd, c->in_contact);
+    return 0;
+}
+
+/* Python's round(v) (half to even, via C round as in float.__round__), returning an int: that
+ * fails for NaN and infinity, and has no negative zero. */
+static int py_round(double v, double *out, char *msg)
+{
+    double rounded;
+    if (isnan(v)) {
+        return fail(msg, "joint angle measurement failed: cannot convert float NaN to integer");
+    }
+    if (isinf(v)) {
+        return fail(msg, "joint angle measurement failed: cannot convert float infinity to"
+                         " integer");
+    }
+    rounded = round(v);
+    if (fabs(v - rounded) == 0.5) {
+        rounded = 2.0 * round(v / 2.0);
+    }
+    *out = rounded == 0.0 ? 0.0 : rounded;
+    return 0;
+}
+
+/* PlantModel._measure: joint encoders, truth + Gaussian noise, then quantized. */
+static int measure(Data *d, const double q[3], double out[3], char *msg)
+{
+    const double q_noise = d->r[VR_q_noise], q_quant = d->r[VR_q_quant];
+    for (int i = 0; i < 3; i++) {
+        double qi = q[i];
+        if (q_noise > 0.0) {
+            qi += pyrandom_gauss(&d->m.rng, 0.0, q_noise);
+        }
+        if (q_quant > 0.0) {
+            double k = 0.0;
+            if (py_round(qi / q_quant, &k, msg)) {
+                return 1;
+            }
+            qi = k * q_quant;
+        }
+        out[i] = qi;
+    }
+    return 0;
+}
+
+/* PlantModel.outputs(), into d->r. */
+static void write_outputs(Data *d)
+{
+    const ModelState *m = &d->m;
+    PlantCtx c;
+    double pose[3], j[9], xdot[3], fx, pen;
+    read_ctx(d, &c);
+    arm_kinematics(&c.arm, m->q, pose);
+    arm_jacobian(&c.arm, m->q, j);
+    for (int r = 0; r < 3; r++) {
+        xdot[r] = j[3 * r] * m->qd[0] + j[3 * r + 1] * m->qd[1] + j[3 * r + 2] * m->qd[2];
+    }
+    fx = wall_force(&c, pose[0], xdot[0]);
+    pen = pose[0] - c.wall_x;
+    pen = pen > 0.0 ? pen : 0.0; /* Python max(0.0, pen) */
+    d->r[VR_q1] = m->q_meas[0];
+    d->r[VR_q2] = m->q_meas[1];
+    d->r[VR_q3] = m->q_meas[2];
+    d->r[VR_fx] = fx;
+    d->r[VR_fy] = 0.0;
+    d->r[VR_n] = 0.0;
+    d->r[VR_q1_true] = m->q[0];
+    d->r[VR_q2_true] = m->q[1];
+    d->r[VR_q3_true] = m->q[2];
+    d->r[VR_qd1] = m->qd[0];
+    d->r[VR_qd2] = m->qd[1];
+    d->r[VR_qd3] = m->qd[2];
+    d->r[VR_x] = pose[0];
+    d->r[VR_y] = pose[1];
+    d->r[VR_phi] = pose[2];
+    d->r[VR_xd] = xdot[0];
+    d->r[VR_yd] = xdot[1];
+    d->r[VR_phid] = xdot[2];
+    d->r[VR_contact_force] = fx;
+    d->r[VR_penetration] = pen;
+}
+
+/* Arm.inverse_kinematics; the message is UnreachablePoseError's, prefixed like PlantModel's. */
+static int inverse_kinematics(const ArmParams *p, double x, double y, double phi, int elbow_up,
+                              double q[3], char *msg)
+{
+    char sx[REPR], sy[REPR], sphi[REPR];
+    double wx, wy, c2, s2, q1, q2;
+    py_float_repr(x, sx, sizeof sx);
+    py_float_repr(y, sy, sizeof sy);
+    py_float_repr(phi, sphi, sizeof sphi);
+    if (!(isfinite(x) && isfinite(y) && isfinite(phi))) {
+        return fail(msg, "initial pose: pose (%s, %s, %s) is not finite", sx, sy, sphi);
+    }
+    wx = x - p->a3 * cos(phi);
+    wy = y - p->a3 * sin(phi);
+    c2 = (wx * wx + wy * wy - pow(p->a1, 2.0) - pow(p->a2, 2.0)) / (2.0 * p->a1 * p->a2);
+    if (c2 > 1.0 || c2 < -1.0) {
+        const double r = hypot(wx, wy);
+        return fail(msg,
+                    "initial pose: pose (x=%s, y=%s, phi=%s) is unreachable: the wrist is %.4f m"
+                    " from the shoulder, the arm reaches from %.4f m to %.4f m",
+                    sx, sy, sphi, r, fabs(p->a1 - p->a2), p->a1 + p->a2);
+    }
+    s2 = elbow_up ? -sqrt(1.0 - c2 * c2) : sqrt(1.0 - c2 * c2);
+    q2 = atan2(s2, c2);
+    q1 = atan2(wy, wx) - atan2(p->a2 * s2, p->a1 + p->a2 * c2);
+    q[0] = q1;
+    q[1] = q2;
+    q[2] = phi - q1 - q2;
+    return 0;
+}
+
+/* --- the model (glue.h) ---------------------------------------------------------------------- */
+
+int model_initialize(Data *d, char *msg)
+{
+    ModelState *m = &d->m;
+    PlantCtx c;
+    double q[3] = {0.0, 0.0, 0.0}, x, xd;
+    char err[ODE_MSG_MAX];
+    read_ctx(d, &c);
+    if (c.arm.a1 <= 0.0 || c.arm.a2 <= 0.0) {
+        char s1[REPR], s2[REPR];
+        py_float_repr(c.arm.a1, s1, sizeof s1);
+        py_float_repr(c.arm.a2, s2, sizeof s2);
+        return fail(msg, "link lengths a1, a2 must be > 0 (got a1=%s, a2=%s)", s1, s2);
+    }
+    if (inverse_kinematics(&c.arm, d->r[VR_x0], d->r[VR_y0], d->r[VR_phi0], d->i[VR_elbow_up] != 0,
+                           q, msg)) {
+        return 1;
+    }
+    memset(m, 0, sizeof *m);
+    m->t = d->start_time;
+    m->q[0] = q[0];
+    m->q[1] = q[1];
+    m->q[2] = q[2];
+    m->qd[0] = m->qd[1] = m->qd[2] = 0.0;
+    if (ee_x(&c.arm, m->q, m->qd, &x, &xd, err)) {
+        return fail(msg, "%s", err); /* not reached: inverse kinematics gives finite angles */
+    }
+    m->in_contact = contact_event(&c, x, xd, 0) > 0.0;
+    m->h = H0;
+    pyrandom_seed(&m->rng, (int64_t)d->i[VR_noise_seed]);
+    if (measure(d, m->q, m->q_meas, msg)) {
+        return 1;
+    }
+    write_outputs(d);
+    return 0;
+}
+
+int model_step(Data *d, double t, double h, char *msg)
+{
+    static const char *const inputs[3] = {"tau1", "tau2", "tau3"};
+    ModelState *m = &d->m;
+    PlantCtx c;
+    OdeResult res;
+    double y[ODE_N], t_end, t_cur, hh, scale;
+    char err[ODE_MSG_MAX], a[REPR], b[REPR];
+    int mode, switches = 0;
+    read_ctx(d, &c);
+    for (int i = 0; i < 3; i++) {
+        const double v = c.tau[i];
+        if (!(v - v == 0.0)) { /* false for NaN and +-inf */
+            py_float_repr(v, a, sizeof a);
+            return fail(msg, "input %s is not finite (%s)", inputs[i], a);
+        }
+    }
+    if (!(h > 0.0)) {
+        py_float_repr(h, a, sizeof a);
+        return fail(msg, "communication step must be > 0 (got %s)", a);
+    }
+    if (isinf(h)) {
+        return fail(msg, "communication step must be finite (got inf)");
+    }
+    scale = fabs(t) > 1.0 ? fabs(t) : 1.0; /* Python max(1.0, abs(t)) */
+    if (fabs(t - m->t) > 1e-9 * scale) {
+        py_float_repr(t, a, sizeof a);
+        py_float_repr(m->t, b, sizeof b);
+        return fail(msg, "doStep at t=%s, but the plant is at t=%s", a, b);
+    }
+    t_end = t + h;
+    for (int i = 0; i < 3; i++) {
+        y[i] = m->q[i];
+        y[3 + i] = m->qd[i];
+    }
+    t_cur = t;
+    mode = m->in_contact;
+    hh = m->h;
+    for (;;) {
+        c.in_contact = mode;
+        if (ode_integrate(plant_rhs, plant_event, &c, t_cur, y, t_end, hh, d->r[VR_rtol],
+                          d->r[VR_atol], ODE_TIME_TOL, &res, err)) {
+            return fail(msg, "plant integration failed: %s", err);
+        }
+        t_cur = res.t;
+        memcpy(y, res.y, sizeof y);
+        hh = res.h;
+        if (!res.hit) {
+            break;
+        }
+        mode = !mode;
+        switches += 1;
+        if (switches > MAX_SWITCHES) {
+            return fail(msg, "plant integration failed: contact chattering: more than %d switches"
+                             " in a step", MAX_SWITCHES);
+        }
+    }
+    m->t = t_end;
+    for (int i = 0; i < 3; i++) {
+        m->q[i] = y[i];
+        m->qd[i] = y[3 + i];
+    }
+    m->in_contact = mode;
+    m->h = hh;
+    if (measure(d, m->q, m->q_meas, msg)) {
+        return 1;
+    }
+    write_outputs(d);
+    return 0;
+}

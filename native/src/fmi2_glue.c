@@ -1,0 +1,667 @@
+/* The FMI 2.0 co-simulation interface of every native model, written once (see glue.h).
+ *
+ * State machine (FMI 2.0, section 4.2.4): instantiated -> initialization mode -> step complete
+ * -> terminated; a call out of order returns fmi2Error with a logged message and changes nothing.
+ * Errors are always logged (whatever fmi2SetDebugLogging says); other messages only with logging
+ * on. Parameter values are checked when set (finite, >= min) and again before initialization;
+ * non-finite inputs are refused when set. A step that cannot be taken returns fmi2Discard and
+ * leaves the instance at the step's start.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "glue.h"
+#include "guid.h" /* MODEL_GUID, written by the build */
+
+typedef enum { S_INSTANTIATED, S_INITIALIZATION, S_STEP_COMPLETE, S_TERMINATED } Phase;
+
+typedef struct {
+    Data d;
+    Phase phase;
+    int dirty; /* outputs must be recomputed before they are read (initialization mode) */
+    double last_time;
+} Snapshot; /* everything an FMU state holds */
+
+typedef struct {
+    Snapshot s;
+    fmi2CallbackFunctions cb;
+    char name[128];
+    int logging_on;
+    char msg[MSG_MAX];
+} Instance;
+
+#define SERIAL_MAGIC 0x494d5043u /* "IMPC" */
+
+typedef struct {
+    unsigned magic;
+    unsigned n_vars;
+    unsigned long size;
+    char identifier[32];
+} SerialHeader;
+
+int fail(char *msg, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, MSG_MAX, fmt, ap);
+    va_end(ap);
+    return 1;
+}
+
+static void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt,
+                        ...)
+{
+    char text[MSG_MAX + 64];
+    va_list ap;
+    if (!inst || !inst->cb.logger) {
+        return;
+    }
+    if (status == fmi2OK && !inst->logging_on) {
+        return;
+    }
+    char safe[2 * (MSG_MAX + 64)];
+    size_t k = 0;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    /* The message itself, not "%s" + argument: many hosts (fmpy) ignore the variadic part. It is
+     * still a format string to printf-style hosts, so '%' is doubled. */
+    for (const char *p = text; *p && k + 2 < sizeof safe; p++) {
+        if (*p == '%') {
+            safe[k++] = '%';
+        }
+        safe[k++] = *p;
+    }
+    safe[k] = '\0';
+    inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
+}
+
+#define ERROR(inst, ...) (log_message((inst), fmi2Error, "logStatusError", __VA_ARGS__), fmi2Error)
+
+static void set_start_values(Data *d)
+{
+    memset(d, 0, sizeof *d);
+    for (int vr = 0; vr < N_VARS; vr++) {
+        const VarInfo *v = &VARS[vr];
+        if (v->type == T_REAL) {
+            d->r[vr] = v->start;
+        } else if (v->type == T_STRING) {
+            strncpy(d->s[vr], v->start_string ? v->start_string : "", STRING_MAX - 1);
+        } else {
+            d->i[vr] = (int)v->start;
+        }
+    }
+}
+
+/* A parameter value the model can accept at all: finite, and not below its minimum. */
+static int check_parameter(int vr, double value, char *msg)
+{
+    const VarInfo *v = &VARS[vr];
+    if (v->type == T_REAL && !isfinite(value)) {
+        return fail(msg, "parameter %s must be finite (got %g)", v->name, value);
+    }
+    if (v->has_min && value < v->min) {
+        return fail(msg, "parameter %s must be >= %g (got %.17g)", v->name, v->min, value);
+    }
+    return 0;
+}
+
+static int initialize(Instance *inst)
+{
+    Data tmp = inst->s.d;
+    for (int vr = 0; vr < N_VARS; vr++) {
+        const VarInfo *v = &VARS[vr];
+        if (v->causality != C_PARAMETER || v->type == T_STRING) {
+            continue;
+        }
+        if (check_parameter(vr, v->type == T_REAL ? tmp.r[vr] : tmp.i[vr], inst->msg)) {
+            return 1;
+        }
+    }
+    if (model_initialize(&tmp, inst->msg)) {
+        return 1;
+    }
+    inst->s.d = tmp;
+    inst->s.dirty = 0;
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation,
+                              const fmi2CallbackFunctions *functions, fmi2Boolean visible,
+                              fmi2Boolean loggingOn)
+{
+    Instance *inst;
+    (void)fmuResourceLocation;
+    (void)visible;
+    if (!functions || !functions->logger) {
+        return NULL;
+    }
+    inst = (Instance *)calloc(1, sizeof(Instance));
+    if (!inst) {
+        functions->logger(functions->componentEnvironment, instanceName, fmi2Error,
+                          "logStatusError", "%s", "out of memory");
+        return NULL;
+    }
+    inst->cb = *functions;
+    strncpy(inst->name, instanceName ? instanceName : "", sizeof inst->name - 1);
+    inst->logging_on = loggingOn;
+    if (fmuType != fmi2CoSimulation) {
+        log_message(inst, fmi2Error, "logStatusError", "%s supports co-simulation only",
+                    MODEL_IDENTIFIER_STR);
+        free(inst);
+        return NULL;
+    }
+    if (!fmuGUID || strcmp(fmuGUID, MODEL_GUID) != 0) {
+        log_message(inst, fmi2Error, "logStatusError", "GUID %s does not match this FMU's %s",
+                    fmuGUID ? fmuGUID : "(null)", MODEL_GUID);
+        free(inst);
+        return NULL;
+    }
+    set_start_values(&inst->s.d);
+    inst->s.phase = S_INSTANTIATED;
+    inst->s.dirty = 1;
+    return inst;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    free(c);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    (void)nCategories;
+    (void)categories;
+    if (!c) {
+        return fmi2Error;
+    }
+    ((Instance *)c)->logging_on = loggingOn;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    Instance *inst = (Instance *)c;
+    (void)toleranceDefined;
+    (void)tolerance;
+    (void)stopTimeDefined;
+    (void)stopTime;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (inst->s.phase != S_INSTANTIATED) {
+        return ERROR(inst, "fmi2SetupExperiment must come before fmi2EnterInitializationMode");
+    }
+    if (!isfinite(startTime)) {
+        return ERROR(inst, "start time must be finite");
+    }
+    inst->s.d.start_time = startTime;
+    inst->s.last_time = startTime;
+    inst->s.dirty = 1;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (inst->s.phase != S_INSTANTIATED) {
+        return ERROR(inst, "fmi2EnterInitializationMode called twice or after initialization");
+    }
+    inst->s.phase = S_INITIALIZATION;
+    inst->s.dirty = 1;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (inst->s.phase != S_INITIALIZATION) {
+        return ERROR(inst, "fmi2ExitInitializationMode called outside initialization mode");
+    }
+    if (inst->s.dirty && initialize(inst)) {
+        return ERROR(inst, "%s", inst->msg);
+    }
+    inst->s.phase = S_STEP_COMPLETE;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (inst->s.phase != S_STEP_COMPLETE) {
+        return ERROR(inst, "fmi2Terminate called before initialization finished or twice");
+    }
+    inst->s.phase = S_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst) {
+        return fmi2Error;
+    }
+    set_start_values(&inst->s.d);
+    inst->s.phase = S_INSTANTIATED;
+    inst->s.dirty = 1;
+    inst->s.last_time = 0.0;
+    return fmi2OK;
+}
+
+/* --- getters and setters ---------------------------------------------------------------------- */
+
+static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
+                               VarType type, int setting)
+{
+    static const char *type_names[] = {"Real", "Integer", "Boolean", "String"};
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (nvr > 0 && !vr) {
+        return ERROR(inst, "value reference array is NULL");
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        if (vr[k] >= N_VARS) {
+            return ERROR(inst, "unknown value reference %u", (unsigned)vr[k]);
+        }
+        if (VARS[vr[k]].type != type) {
+            return ERROR(inst, "variable %s is not of type %s", VARS[vr[k]].name,
+                         type_names[type]);
+        }
+        if (setting) {
+            const VarInfo *v = &VARS[vr[k]];
+            if (v->causality == C_OUTPUT) {
+                return ERROR(inst, "variable %s is an output: it cannot be set", v->name);
+            }
+            if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION) {
+                return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
+                             v->name);
+            }
+            if (inst->s.phase == S_TERMINATED) {
+                return ERROR(inst, "variable %s cannot be set after fmi2Terminate", v->name);
+            }
+        }
+    }
+    if (!setting && inst->s.phase == S_INSTANTIATED && nvr > 0) {
+        return ERROR(inst, "values can be read only from initialization mode on");
+    }
+    if (!setting && inst->s.dirty && inst->s.phase == S_INITIALIZATION && initialize(inst)) {
+        return ERROR(inst, "%s", inst->msg);
+    }
+    return fmi2OK;
+}
+
+static void mark_dirty(Instance *inst)
+{
+    if (inst->s.phase <= S_INITIALIZATION) {
+        inst->s.dirty = 1;
+    }
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                       fmi2Real value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_REAL, 0);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        value[k] = inst->s.d.r[vr[k]];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Integer value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_INTEGER, 0);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        value[k] = inst->s.d.i[vr[k]];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Boolean value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_BOOLEAN, 0);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        value[k] = inst->s.d.i[vr[k]] ? fmi2True : fmi2False;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                         fmi2String value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_STRING, 0);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        value[k] = inst->s.d.s[vr[k]];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                       const fmi2Real value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_REAL, 1);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) { /* check all before changing anything */
+        const VarInfo *v = &VARS[vr[k]];
+        if (v->causality == C_INPUT && !isfinite(value[k])) {
+            return ERROR(inst, "input %s is not finite (%g)", v->name, value[k]);
+        }
+        if (v->causality == C_PARAMETER && check_parameter((int)vr[k], value[k], inst->msg)) {
+            return ERROR(inst, "%s", inst->msg);
+        }
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        inst->s.d.r[vr[k]] = value[k];
+    }
+    mark_dirty(inst);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Integer value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_INTEGER, 1);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        if (VARS[vr[k]].causality == C_PARAMETER &&
+            check_parameter((int)vr[k], value[k], inst->msg)) {
+            return ERROR(inst, "%s", inst->msg);
+        }
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        inst->s.d.i[vr[k]] = value[k];
+    }
+    mark_dirty(inst);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Boolean value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_BOOLEAN, 1);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        inst->s.d.i[vr[k]] = value[k] ? 1 : 0;
+    }
+    mark_dirty(inst);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                         const fmi2String value[])
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, T_STRING, 1);
+    if (status != fmi2OK) {
+        return status;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        if (!value[k] || strlen(value[k]) >= STRING_MAX) {
+            return ERROR(inst, "string value for %s is NULL or longer than %d characters",
+                         VARS[vr[k]].name, STRING_MAX - 1);
+        }
+    }
+    for (size_t k = 0; k < nvr; k++) {
+        memset(inst->s.d.s[vr[k]], 0, STRING_MAX);
+        strcpy(inst->s.d.s[vr[k]], value[k]);
+    }
+    mark_dirty(inst);
+    return fmi2OK;
+}
+
+/* --- stepping ------------------------------------------------------------------------------- */
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
+                      fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    Instance *inst = (Instance *)c;
+    ModelState backup_m;
+    double backup_r[N_VARS];
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (inst->s.phase != S_STEP_COMPLETE) {
+        return ERROR(inst, "fmi2DoStep called before initialization finished or after "
+                           "fmi2Terminate");
+    }
+    /* A model step writes only the model state and the outputs: back those up, restore them if
+     * the step is refused (cheaper than stepping a full copy of Data). */
+    backup_m = inst->s.d.m;
+    memcpy(backup_r, inst->s.d.r, sizeof backup_r);
+    if (model_step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg)) {
+        inst->s.d.m = backup_m;
+        memcpy(inst->s.d.r, backup_r, sizeof backup_r);
+        log_message(inst, fmi2Discard, "logStatusError", "at t=%.17g: %s",
+                    currentCommunicationPoint, inst->msg);
+        inst->s.last_time = currentCommunicationPoint;
+        return fmi2Discard;
+    }
+    inst->s.last_time = currentCommunicationPoint + communicationStepSize;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    return ERROR((Instance *)c, "fmi2CancelStep: doStep never runs asynchronously");
+}
+
+/* --- FMU state -------------------------------------------------------------------------------- */
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst || !state) {
+        return fmi2Error;
+    }
+    if (!*state) {
+        *state = malloc(sizeof(Snapshot));
+        if (!*state) {
+            return ERROR(inst, "out of memory for an FMU state");
+        }
+    }
+    memcpy(*state, &inst->s, sizeof(Snapshot));
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (!state) {
+        return ERROR(inst, "fmi2SetFMUstate: the state is NULL");
+    }
+    memcpy(&inst->s, state, sizeof(Snapshot));
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    if (!c || !state) {
+        return fmi2Error;
+    }
+    free(*state);
+    *state = NULL;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    (void)state;
+    if (!c || !size) {
+        return fmi2Error;
+    }
+    *size = sizeof(SerialHeader) + sizeof(Snapshot);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[],
+                                 size_t size)
+{
+    Instance *inst = (Instance *)c;
+    SerialHeader header;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (!state || !serializedState || size < sizeof header + sizeof(Snapshot)) {
+        return ERROR(inst, "fmi2SerializeFMUstate: NULL state or buffer smaller than %lu bytes",
+                     (unsigned long)(sizeof header + sizeof(Snapshot)));
+    }
+    memset(&header, 0, sizeof header);
+    header.magic = SERIAL_MAGIC;
+    header.n_vars = N_VARS;
+    header.size = sizeof(Snapshot);
+    strncpy(header.identifier, MODEL_IDENTIFIER_STR, sizeof header.identifier - 1);
+    memcpy(serializedState, &header, sizeof header);
+    memcpy(serializedState + sizeof header, state, sizeof(Snapshot));
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *state)
+{
+    Instance *inst = (Instance *)c;
+    SerialHeader header;
+    if (!inst || !state) {
+        return fmi2Error;
+    }
+    if (!serializedState || size != sizeof header + sizeof(Snapshot)) {
+        return ERROR(inst, "serialized state has %lu bytes, expected %lu",
+                     (unsigned long)size, (unsigned long)(sizeof header + sizeof(Snapshot)));
+    }
+    memcpy(&header, serializedState, sizeof header);
+    if (header.magic != SERIAL_MAGIC || header.n_vars != N_VARS ||
+        header.size != sizeof(Snapshot) ||
+        strncmp(header.identifier, MODEL_IDENTIFIER_STR, sizeof header.identifier) != 0) {
+        return ERROR(inst, "serialized state is not from a %s FMU of this build",
+                     MODEL_IDENTIFIER_STR);
+    }
+    if (!*state) {
+        *state = malloc(sizeof(Snapshot));
+        if (!*state) {
+            return ERROR(inst, "out of memory for an FMU state");
+        }
+    }
+    memcpy(*state, serializedState + sizeof header, sizeof(Snapshot));
+    return fmi2OK;
+}
+
+/* --- not supported / status --------------------------------------------------------------------- */
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
+                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[],
+                                        size_t nKnown, const fmi2Real dvKnown[],
+                                        fmi2Real dvUnknown[])
+{
+    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
+        (void)dvUnknown;
+    return ERROR((Instance *)c, "directional derivatives are not provided");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return ERROR((Instance *)c, "input derivatives are not supported (canInterpolateInputs=false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return ERROR((Instance *)c, "output derivatives are not provided");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    (void)s, (void)value;
+    return ERROR((Instance *)c, "fmi2GetStatus: no asynchronous step to report on");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst || !value) {
+        return fmi2Error;
+    }
+    if (s != fmi2LastSuccessfulTime) {
+        return ERROR(inst, "fmi2GetRealStatus supports fmi2LastSuccessfulTime only");
+    }
+    *value = inst->s.last_time;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    (void)s, (void)value;
+    return ERROR((Instance *)c, "fmi2GetIntegerStatus: no integer status");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    Instance *inst = (Instance *)c;
+    if (!inst || !value) {
+        return fmi2Error;
+    }
+    if (s != fmi2Terminated) {
+        return ERROR(inst, "fmi2GetBooleanStatus supports fmi2Terminated only");
+    }
+    *value = fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    (void)s, (void)value;
+    return ERROR((Instance *)c, "fmi2GetStringStatus: no string status");
+}

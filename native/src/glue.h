@@ -1,0 +1,55 @@
+/* The shared FMI 2.0 co-simulation layer of the native FMUs, and what a model provides.
+ *
+ * Each model folder (native/plant, native/controller) holds config.h (generated from the model's
+ * Python variable table: value references, types, start values, ranges), model.h (its ModelState:
+ * plain data, copied for FMU states) and model.c (model_initialize, model_step). fmi2_glue.c
+ * implements every fmi2* function once, for any model, on the Data below.
+ *
+ * Conventions mirror the Python FMUs (impedance_cosim/fmi/slave.py):
+ * - variables are stored by value reference: Real in r[], Integer and Boolean in i[], String in s[];
+ * - model_initialize builds the initial state and outputs from parameters and inputs (it may be
+ *   called several times during initialization mode, whenever a getter needs fresh outputs);
+ * - model_step advances from t to t + h, writing only d->m and the outputs in d->r (parameters
+ *   and inputs are read-only); the glue restores both when the step is refused, so the instance
+ *   stays at the step's start.
+ * Both return 0 on success, or 1 after writing a message that names the problem into msg.
+ */
+#ifndef GLUE_H
+#define GLUE_H
+
+#include <stddef.h>
+
+#define STRING_MAX 64
+#define MSG_MAX 512
+
+typedef enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING } VarType;
+typedef enum { C_PARAMETER, C_INPUT, C_OUTPUT } Causality;
+
+typedef struct {
+    const char *name;
+    VarType type;
+    Causality causality;
+    double start;             /* Real, Integer and Boolean start values */
+    const char *start_string; /* String start value */
+    int has_min;
+    double min;
+} VarInfo;
+
+#include "config.h" /* N_VARS, VR_<name>, MODEL_IDENTIFIER_STR, VARS[] */
+#include "model.h"  /* ModelState */
+
+typedef struct {
+    double r[N_VARS];
+    int i[N_VARS];
+    char s[N_VARS][STRING_MAX];
+    ModelState m;
+    double start_time;
+} Data;
+
+int model_initialize(Data *d, char *msg);
+int model_step(Data *d, double t, double h, char *msg);
+
+/* snprintf into msg (MSG_MAX bytes); returns 1 so models can write `return fail(msg, ...)` */
+int fail(char *msg, const char *fmt, ...);
+
+#endif

@@ -228,12 +228,13 @@ def figure_4(observer_run: Signals, difference_run: Signals, path: Path) -> None
         t = s["time"]
         est = cartesian_velocity(s, prefix)[:-1, 0]
         phases = contact_phases(s)
-        a = phases[0][0] if phases else t[0]
+        a, zoom = (phases[0][0], "the first 0.25 s of contact") if phases else (
+            max(t[0], t[-1] - 0.25), "the last 0.25 s (no contact)")  # fmt: skip
         for j, w in enumerate((t[:-1] >= t[0], (t[:-1] >= a) & (t[:-1] <= a + 0.25))):
             axis = ax[2 * j + k]
             axis.plot(t[:-1][w], s["plant.xd"][:-1][w], "k-", lw=1, label="actual")
             axis.plot(t[:-1][w], est[w], "r--", lw=0.8, label=label)
-            title = f"({'ab'[k]}) actual vs {label}" if j == 0 else "the first 0.25 s of contact"
+            title = f"({'ab'[k]}) actual vs {label}" if j == 0 else zoom
             axis.set(xlabel="t [s]", ylabel="x-velocity [m/s]", title=title)
             axis.legend(fontsize=8)
     fig.savefig(path, dpi=110)

@@ -80,6 +80,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         rtf = (result.data[-1, 0] - result.data[0, 0]) / max(result.wall_time, 1e-9)
         print(f"{master.parameter_set}: {status}, {len(result.data)} rows -> {path} "
               f"({result.wall_time:.2f} s wall, {rtf:.1f}x real time)")  # fmt: skip
+        if not result.ok:
+            print(f"  {result.error}")
         return result
 
     main = run(args.scenario)

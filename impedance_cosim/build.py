@@ -103,15 +103,7 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
             digest.update(zin.read(name))
 
         def xml(guid: str) -> bytes:
-            return model_description(
-                model_name=cls.MODEL_NAME,
-                description=cls.DESCRIPTION,
-                guid=guid,
-                variables=cls.variables(),
-                default_experiment=cls.DEFAULT_EXPERIMENT,
-                generation_tool=f"impedance_cosim {impedance_cosim.__version__} (pythonfmu)",
-                output_dependencies=cls.OUTPUT_DEPENDENCIES,
-            )
+            return _model_description(cls, guid, "pythonfmu")
 
         digest.update(xml(""))
         guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
@@ -129,8 +121,8 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
 
 NATIVE = REPO / "native"
-NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm_terms.c", "arm_terms.h", "ode.c",
-                 "ode.h", "pyrandom.c", "pyrandom.h")  # fmt: skip
+NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
+                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h")  # fmt: skip
 NATIVE_MODEL = ("config.h", "model.h", "model.c")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = [
@@ -174,16 +166,7 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
     c_files = sorted(n for n in sources if n.endswith(".c"))
 
     def xml(guid: str) -> bytes:
-        return model_description(
-            model_name=cls.MODEL_NAME,
-            description=cls.DESCRIPTION,
-            guid=guid,
-            variables=cls.variables(),
-            default_experiment=cls.DEFAULT_EXPERIMENT,
-            generation_tool=f"impedance_cosim {impedance_cosim.__version__} (native C99)",
-            output_dependencies=cls.OUTPUT_DEPENDENCIES,
-            source_files=c_files,
-        )
+        return _model_description(cls, guid, "native C99", source_files=c_files)
 
     digest = hashlib.sha256(xml(""))
     for name in sorted(sources):
@@ -268,6 +251,21 @@ def build_ssp(
         raise ValueError(f"{target.name} does not validate: {exc}") from None
     tmp_target.replace(target)
     return target
+
+
+def _model_description(cls, guid: str, flavour: str, source_files=None) -> bytes:
+    """modelDescription.xml of a model class, the same for both flavours but the tool name and
+    the source file list."""
+    return model_description(
+        model_name=cls.MODEL_NAME,
+        description=cls.DESCRIPTION,
+        guid=guid,
+        variables=cls.variables(),
+        default_experiment=cls.DEFAULT_EXPERIMENT,
+        generation_tool=f"impedance_cosim {impedance_cosim.__version__} ({flavour})",
+        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+        source_files=source_files,
+    )
 
 
 def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> list[Path]:

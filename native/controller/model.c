@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "arm.h"
 #include "arm_terms.h"
 #include "glue.h"
 #include "linalg3.h"
@@ -192,26 +193,6 @@ static void str_repr(const char *s, char *buf, size_t size)
     snprintf(buf, size, "%s", out);
 }
 
-/* --- arm: Arm.forward_dynamics, jacobian_det, friction -------------------------------------- */
-
-static int forward_dynamics(const ArmParams *p, const double q[3], const double qd[3],
-                            const double tau[3], double qdd[3])
-{
-    double c[9], cqd[3], grav[3], rhs[3], h[9];
-    arm_coriolis(p, q, qd, c);
-    matvec(c, qd, cqd);
-    arm_gravity(p, q, grav);
-    rhs[0] = tau[0] - cqd[0] - p->f1 * qd[0] - grav[0];
-    rhs[1] = tau[1] - cqd[1] - p->f2 * qd[1] - grav[1];
-    rhs[2] = tau[2] - cqd[2] - p->f3 * qd[2] - grav[2];
-    arm_inertia(p, q, h);
-    return solve3(h, rhs, qdd);
-}
-
-static double jacobian_det(const ArmParams *p, const double q[3])
-{
-    return p->a1 * p->a2 * sin(q[1]);
-}
 
 /* --- virtual trajectory, observer, impedance law --------------------------------------------- */
 
@@ -254,7 +235,7 @@ static int observer_update(const Params *p, const double yhat_prev[3], const dou
     net[0] = tau_prev[0] - jtf[0];
     net[1] = tau_prev[1] - jtf[1];
     net[2] = tau_prev[2] - jtf[2];
-    if (forward_dynamics(&p->arm, q_prev, yhat_prev, net, acc)) {
+    if (arm_forward_dynamics(&p->arm, q_prev, yhat_prev, net, acc)) {
         /* Python: ZeroDivisionError in linalg3.solve */
         return fail(msg, "the inertia matrix of the controller's arm model is singular");
     }
@@ -278,7 +259,7 @@ static int impedance_terms(const Params *p, const double q[3], const double yhat
 {
     const ArmParams *arm = &p->arm;
     const double *G = p->G, *B = p->B;
-    const double det = jacobian_det(arm, q);
+    const double det = arm_jacobian_det(arm, q);
     double j[9], qd_v[3], jdot[9], jdot_qd[3], rhs[3], qdd_v[3], pose[3], f_c[3], jtf[3];
     double h[9], hq[3], c[9], cq[3], fq[3], g[3];
     if (!(fabs(det) >= SINGULAR_TOL * arm->a1 * arm->a2)) {

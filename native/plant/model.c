@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "arm.h"
 #include "arm_terms.h"
 #include "glue.h"
 #include "linalg3.h"
@@ -128,20 +129,11 @@ static int ee_x(const ArmParams *a, const double q[3], const double qd[3], doubl
     return 0;
 }
 
-/* Arm.forward_dynamics: qdd = H^-1 (tau - C qd - F qd - g); a singular H is Python's
- * ZeroDivisionError. */
+/* Arm.forward_dynamics (arm.h); a singular H is Python's ZeroDivisionError. */
 static int forward_dynamics(const ArmParams *p, const double q[3], const double qd[3],
                             const double tau[3], double qdd[3], char *err)
 {
-    double c[9], cqd[3], grav[3], hm[9], rhs[3];
-    arm_coriolis(p, q, qd, c);
-    matvec(c, qd, cqd);
-    arm_gravity(p, q, grav);
-    rhs[0] = tau[0] - cqd[0] - p->f1 * qd[0] - grav[0];
-    rhs[1] = tau[1] - cqd[1] - p->f2 * qd[1] - grav[1];
-    rhs[2] = tau[2] - cqd[2] - p->f3 * qd[2] - grav[2];
-    arm_inertia(p, q, hm);
-    if (solve3(hm, rhs, qdd)) {
+    if (arm_forward_dynamics(p, q, qd, tau, qdd)) {
         snprintf(err, ODE_MSG_MAX, "float division by zero");
         return 1;
     }

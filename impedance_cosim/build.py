@@ -7,6 +7,7 @@ import hashlib
 import importlib
 import os
 import shutil
+import sys
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
@@ -275,8 +276,13 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
     if unknown:
         raise ValueError(f"unknown FMU {unknown}; choose from {sorted(FMUS)}")
     built = [build_fmu(FMUS[k], out_dir) for k in keys]
-    built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in keys]
+    native = [k for k in keys if (NATIVE / k / "model.c").is_file()]
+    if native and shutil.which(os.environ.get("CC", "gcc")) is None:
+        print("warning: no C compiler (gcc or $CC): the native FMUs are not built", file=sys.stderr)
+        native = []
+    built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in native]
     if not only:
         built.append(build_ssp(out_dir))
-        built.append(build_ssp(out_dir, "PaperScenario-native", Path(out_dir) / "native"))
+        if native:
+            built.append(build_ssp(out_dir, "PaperScenario-native", Path(out_dir) / "native"))
     return built

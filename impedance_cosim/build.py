@@ -50,6 +50,7 @@ FMUS = {
         "ImpedanceController.py",
         "controller_model.model.ControllerModel",
     ),
+    "bridge": FmuSpec("bridge", "bridge_model", "BridgePlant.py", "bridge_model.model.BridgeModel"),
 }
 
 

@@ -72,6 +72,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             algorithm=args.algorithm,
             step_size=args.step,
             stop_time=args.stop,
+            fmu_files=getattr(args, "fmu_files", None),
+            realtime=getattr(args, "realtime", False),
         )
         result = master.run(progress=progress)
         path = out / f"{master.parameter_set or 'run'}.csv"
@@ -91,6 +93,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 1
     values = analysis.summary(main)
     print(analysis.format_summary(values))
+    if "realtime" in main.info:
+        from impedance_cosim.master import format_realtime
+
+        values["realtime"] = main.info["realtime"]
+        print(format_realtime(main.info["realtime"]))
     (out / f"{main.parameter_set}_summary.json").write_text(json.dumps(values, indent=2) + "\n")
     if args.no_figures:
         return 0
@@ -112,21 +119,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the impedance-cosim command."""
-    parser = argparse.ArgumentParser(
-        prog="impedance-cosim",
-        description="Impedance control without velocity measurements, as FMI co-simulation.",
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("build", help="build the FMUs and the system archive into fmus/")
-    p.add_argument("--out", default=str(REPO / "fmus"),
-                   help="output folder (default: the repository's fmus/)")  # fmt: skip
-    p.add_argument("--only", action="append", choices=["plant", "controller"],
-                   help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
-    p.set_defaults(func=_cmd_build)
-
-    p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures")
+def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
+    """The options of `run` (shared with the commands that run the system the same way)."""
     p.add_argument("--scenario", default=None,
                    help="parameter set of the SSD: observer (default, the paper), difference, "
                         "measured")  # fmt: skip
@@ -139,10 +133,36 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", metavar="COMPONENT.VARIABLE=VALUE",
                    help="override a parameter, e.g. controller.K=80 (K1..K3) or "
                         "plant.q_noise=1e-4 (repeatable)")  # fmt: skip
-    p.add_argument("--out", default="results", help="output folder (default results/)")
+    p.add_argument("--realtime", action="store_true",
+                   help="pace the steps to the wall clock; per-step timing recorded")  # fmt: skip
+    p.add_argument("--out", default=out, help=f"output folder (default {out}/)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the impedance-cosim command."""
+    parser = argparse.ArgumentParser(
+        prog="impedance-cosim",
+        description="Impedance control without velocity measurements, as FMI co-simulation.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("build", help="build the FMUs and the system archive into fmus/")
+    p.add_argument("--out", default=str(REPO / "fmus"),
+                   help="output folder (default: the repository's fmus/)")  # fmt: skip
+    p.add_argument("--only", action="append", choices=["plant", "controller", "bridge"],
+                   help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
+    p.set_defaults(func=_cmd_build)
+
+    p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures")
+    add_run_options(p)
     p.set_defaults(func=_cmd_run)
+    from impedance_cosim import sweep
+
+    sweep.add_parser(sub)
+    from impedance_cosim.hil import add_parsers as add_hil_parsers
+
+    add_hil_parsers(sub)
 
     args = parser.parse_args(argv)
     from impedance_cosim.master import MasterError

@@ -59,6 +59,7 @@ class FmuInstance:
         )
         self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
         self._alive = True
+        self.fatal = False  # an fmi2Fatal status was returned: no further call is allowed
         self._do_step = self.slave._functions["fmi2DoStep"]  # raw ctypes: we check the status
 
     # --- logging and status ---------------------------------------------------------------------
@@ -76,6 +77,7 @@ class FmuInstance:
         try:
             return getattr(self.slave, method)(*args, **kwargs)
         except FMICallException as exc:
+            self.fatal |= exc.status == 4
             detail = "; ".join(self.errors()[-3:]) or "no message logged"
             raise FmuError(f"{self.name}: {exc} ({detail})") from None
         except Exception as exc:  # instantiate() raises a bare Exception
@@ -133,7 +135,9 @@ class FmuInstance:
         def read() -> list[float]:
             status = fn(comp, vr_arr, n, val_arr)
             if status > 1:
-                raise FmuError(f"{self.name}: fmi2GetReal failed ({STATUS[status]})")
+                self.fatal |= status == 4
+                detail = "; ".join(self.errors()[-3:]) or "no message logged"
+                raise FmuError(f"{self.name}: fmi2GetReal failed ({STATUS[status]}: {detail})")
             return list(val_arr)
 
         return read
@@ -150,6 +154,7 @@ class FmuInstance:
             val_arr[:] = values
             status = fn(comp, vr_arr, n, val_arr)
             if status > 1:
+                self.fatal |= status == 4
                 detail = "; ".join(self.errors()[-3:]) or "no message logged"
                 raise FmuError(f"{self.name}: fmi2SetReal failed ({STATUS[status]}: {detail})")
 
@@ -171,6 +176,7 @@ class FmuInstance:
         """fmi2DoStep; raises FmuError with the FMU's messages unless it returns OK/Warning."""
         status = self._do_step(self.slave.component, t, h, 1)
         if status > 1:
+            self.fatal |= status == 4
             detail = "; ".join(self.errors()[-3:]) or "no message logged"
             raise FmuError(f"{self.name}: doStep at t={t} returned {STATUS[status]} ({detail})")
 
@@ -190,13 +196,20 @@ class FmuInstance:
         return self._call("deSerializeFMUstate", bytes(data))
 
     def terminate(self) -> None:
+        if self.fatal:
+            raise FmuError(f"{self.name}: not terminated: the FMU returned fmi2Fatal")
         self._call("terminate")
 
     def free(self) -> None:
-        """Free the instance (and unload the library, as fmpy does). Safe to call twice."""
+        """Free the instance (and unload the library, as fmpy does). Safe to call twice.
+
+        After fmi2Fatal the standard allows no further call, so the instance is left alone (with
+        pythonfmu 0.7, freeing it then releases Python objects twice and crashes the process
+        later)."""
         if self._alive:
             self._alive = False
-            self.slave.freeInstance()
+            if not self.fatal:
+                self.slave.freeInstance()
 
 
 def fmi_value(kind: str, value: Any, name: str) -> Any:

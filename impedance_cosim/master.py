@@ -11,6 +11,13 @@
 - Recording: one row at t_0 (after initialization) and one at each t_i+1 = the outputs after the
   step that ends there (as FMI defines them: a sampled output holds the last sample's value), every
   Real output of every component ("plant.x", "controller.tau1", ...), so every connection too.
+- Real time (`realtime=True`): step i starts at the wall-clock time t0_wall + i * h (sleep, then a
+  short busy-wait), t0_wall taken after initialization; a late step is never skipped, the next
+  one starts at once (the schedule is absolute, so the master catches up). Per step the result
+  gets three extra columns: `rt.start_late_s` (actual start - scheduled start: the jitter),
+  `rt.compute_s` (the step's duration) and `rt.lateness_s` (completion - deadline
+  t0_wall + (i + 1) h; > 0 is a deadline miss); RunResult.info["realtime"] holds the statistics
+  (see realtime_stats). The garbage collector is paused while stepping in real time.
 - Every FMI status is checked. A failing FMU, a non-finite value or a value beyond
   `divergence_limit` stops the run with a message naming the signal and time; the rows computed so
   far are kept in the result.
@@ -19,6 +26,7 @@
 from __future__ import annotations
 
 import ctypes
+import gc
 import sys
 import time as wallclock
 from collections.abc import Mapping
@@ -34,6 +42,8 @@ from impedance_cosim.ssp import SspError, SystemDescription
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 CHUNK = 400  # steps per call into the loop (progress bar, interrupts)
+RT_COLUMNS = ["rt.start_late_s", "rt.compute_s", "rt.lateness_s"]
+SPIN_S = 0.0005  # real time: busy-wait this long before each step's start (sleep overshoots)
 MAX_INIT_PASSES = 20
 
 
@@ -73,6 +83,25 @@ def split_name(name: str) -> tuple[str, str]:
     return comp, var
 
 
+def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list[str]:
+    """How an FMU's variables (name -> fmpy ScalarVariable) differ from a component's SSD
+    connectors: a missing variable, another causality, type or unit (one line each)."""
+    problems = []
+    for c in comp.connectors.values():
+        v = fmu_vars.get(c.name)
+        where = f"{comp.name}.{c.name}"
+        if v is None:
+            problems.append(f"{where}: no such variable in {fmu_name}")
+            continue
+        if v.causality != c.kind:
+            problems.append(f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD")
+        if v.type != c.type:
+            problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
+        if c.type == "Real" and (v.unit or None) != (c.unit or None):
+            problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
+    return problems
+
+
 class _Slot:
     """One component during a run: its FMU instance and fast accessors."""
 
@@ -104,6 +133,7 @@ class Master:
         divergence_limit: float = 1e6,
         fmu_files: Mapping[str, Path] | None = None,
         loop: str = "auto",
+        realtime: bool = False,
     ) -> None:
         self.system = system
         self.algorithm = algorithm or system.algorithm or "gauss-seidel"
@@ -126,6 +156,7 @@ class Master:
         if loop not in ("auto", "c", "python"):
             raise MasterError(f"loop must be auto, c or python (got {loop!r})")
         self.loop = loop
+        self.realtime = realtime
         sets = system.parameter_sets
         if parameter_set is None:
             parameter_set = next(iter(sets), "")
@@ -204,23 +235,8 @@ class Master:
         """Every SSD connector exists in its FMU with the same causality, type and unit."""
         problems = []
         for comp in self.system.components:
-            fmu_vars = variables[comp.name]
-            for c in comp.connectors.values():
-                v = fmu_vars.get(c.name)
-                where = f"{comp.name}.{c.name}"
-                if v is None:
-                    problems.append(
-                        f"{where}: no such variable in {self.fmu_files[comp.name].name}"
-                    )
-                    continue
-                if v.causality != c.kind:
-                    problems.append(
-                        f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD"
-                    )
-                if v.type != c.type:
-                    problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
-                if c.type == "Real" and (v.unit or None) != (c.unit or None):
-                    problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
+            fmu_name = self.fmu_files[comp.name].name
+            problems += connector_problems(comp, variables[comp.name], fmu_name)
         if problems:
             raise MasterError("the FMUs do not match the SSD: " + "; ".join(problems))
 
@@ -242,6 +258,7 @@ class Master:
         n = int(round((self.stop_time - t0) / h))
         data = np.empty((n + 1, len(names)))
         rows, error = 0, None
+        timing = None
         info: dict[str, Any] = {}
         started = wallclock.perf_counter()
         bar = _Progress(n, h) if progress else None
@@ -255,6 +272,10 @@ class Master:
                 raise MasterError("the C loop cannot be compiled here (no C compiler?)")
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
             stepping = wallclock.perf_counter()
+            if self.realtime and not error:
+                timing = np.zeros((n + 1, len(RT_COLUMNS)))
+                rows, error = self._realtime_steps(step, ordered, data, names, timing, bar)
+                info["realtime"] = realtime_stats(timing[1:rows], h)
             while not error and rows < n + 1:
                 chunk = min(n + 1 - rows, CHUNK)
                 done, error = step(ordered, data, names, rows - 1, chunk)
@@ -274,9 +295,14 @@ class Master:
                 except FmuError:
                     pass
                 s.fmu.free()
+        data = data[:rows]
+        if self.realtime:
+            names = [*names, *RT_COLUMNS]
+            rt = timing[:rows] if timing is not None else np.zeros((rows, len(RT_COLUMNS)))
+            data = np.hstack((data, rt))
         return RunResult(
             names=names,
-            data=data[:rows],
+            data=data,
             step_size=h,
             algorithm=self.algorithm,
             parameter_set=self.parameter_set,
@@ -284,6 +310,37 @@ class Master:
             wall_time=wallclock.perf_counter() - started,
             info=info,
         )
+
+    def _realtime_steps(self, step, ordered, data, names, timing, bar) -> tuple[int, str | None]:
+        """All steps one at a time, each started at its wall-clock time (see module docstring);
+        fills timing[i + 1] for step i; returns (rows filled, error or None)."""
+        h, n = self.step_size, len(data) - 1
+        clock = wallclock.perf_counter
+        rows, error = 1, None
+        collecting = gc.isenabled()
+        gc.disable()
+        try:
+            t_wall0 = clock()
+            for i in range(n):
+                scheduled = t_wall0 + i * h
+                remaining = scheduled - clock()
+                if remaining > SPIN_S:
+                    wallclock.sleep(remaining - SPIN_S)
+                while clock() < scheduled:
+                    pass
+                began = clock()
+                done, error = step(ordered, data, names, i, 1)
+                ended = clock()
+                timing[i + 1] = (began - scheduled, ended - began, ended - scheduled - h)
+                rows += done
+                if error:
+                    break
+                if bar:
+                    bar.update(i + 1)
+        finally:
+            if collecting:
+                gc.enable()
+        return rows, error
 
     def _python_steps(self, ordered, data, names, first: int, count: int):
         """Steps first .. first + count - 1 in Python; returns (rows filled, error or None)."""
@@ -346,6 +403,7 @@ class Master:
             _ = keep
             if err.comp >= 0:
                 s = ordered[err.comp]
+                s.fmu.fatal |= err.status == 4
                 call = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")[err.call]
                 t = self.start_time + (first + done) * self.step_size
                 detail = "; ".join(s.fmu.errors()[-3:]) or "no message logged"
@@ -400,6 +458,43 @@ class Master:
             f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g}"
             f" (limit {self.divergence_limit:g}); results kept up to there"
         )
+
+
+def realtime_stats(timing: np.ndarray, h: float) -> dict[str, Any]:
+    """Statistics of the steps' timing rows (RT_COLUMNS): deadline misses (a step completed after
+    its deadline), start jitter (actual - scheduled start) p50/p99/max, step duration p99/max,
+    worst lateness; times in seconds."""
+    if not len(timing):
+        return {"steps": 0, "rate_hz": 1.0 / h, "deadline_misses": 0}
+    start, compute, late = timing[:, 0], timing[:, 1], timing[:, 2]
+    return {
+        "steps": len(timing),
+        "rate_hz": 1.0 / h,
+        "deadline_misses": int(np.count_nonzero(late > 0.0)),
+        "jitter_p50_s": float(np.percentile(start, 50)),
+        "jitter_p99_s": float(np.percentile(start, 99)),
+        "jitter_max_s": float(start.max()),
+        "compute_p50_s": float(np.percentile(compute, 50)),
+        "compute_p99_s": float(np.percentile(compute, 99)),
+        "compute_max_s": float(compute.max()),
+        "lateness_max_s": float(late.max()),
+    }
+
+
+def format_realtime(stats: dict[str, Any]) -> str:
+    """The real-time statistics as summary lines."""
+    if not stats.get("steps"):
+        return "real time: no step taken"
+    ms = 1e3
+    return (
+        f"real time at {stats['rate_hz']:g} Hz: {stats['deadline_misses']} deadline misses in"
+        f" {stats['steps']} steps\n"
+        f"start jitter: p50 {ms * stats['jitter_p50_s']:.3f} ms, p99"
+        f" {ms * stats['jitter_p99_s']:.3f} ms, max {ms * stats['jitter_max_s']:.3f} ms\n"
+        f"step duration: p50 {ms * stats['compute_p50_s']:.3f} ms, p99"
+        f" {ms * stats['compute_p99_s']:.3f} ms, max {ms * stats['compute_max_s']:.3f} ms"
+        f" (worst slack {-ms * stats['lateness_max_s']:.3f} ms)"
+    )
 
 
 class _Progress:

@@ -171,3 +171,24 @@ def test_two_instances_in_one_process(fmu_dir):
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__]))
+
+
+def test_process_survives_an_initialization_error(ssp_path):
+    """After fmi2Fatal the instance is left alone (pythonfmu 0.7 releases Python objects twice if
+    it is freed, and the process crashed at a later garbage collection: segfault before the fix)."""
+    script = f"""
+import gc
+from impedance_cosim.master import Master
+from impedance_cosim.ssp import read_ssp
+system = read_ssp(r"{ssp_path}")
+for k in range(3):
+    bad = Master(system, overrides={{"plant.x0": 5.0}}, stop_time=0.1).run()
+    assert "unreachable" in bad.error, bad.error
+    assert Master(system, stop_time=0.1).run().ok
+    gc.collect()
+print("survived")
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0 and "survived" in done.stdout, done.stderr[-1000:]

@@ -1,0 +1,248 @@
+"""The bridge plant: the PumaPlant interface in front of an external robot process.
+
+It simulates nothing. Initialization sends the plant parameters to the robot process (INIT) and
+takes its initial outputs from the reply; each do_step sends the torques (STEP, sequence number
+1, 2, ...) and returns the outputs the robot reports after the step. UDP, protocol in
+bridge_model/protocol.py (docs/hil.md).
+
+Failures (all logged with the cause, the step is not taken):
+
+- no reply within `timeout_s` (a lost or late packet, a stalled robot): "timeout after X ms
+  waiting for sequence N";
+- the robot process is gone (ICMP port unreachable on loopback): "robot process not reachable";
+- a reply with another sequence number: "reply had sequence M, expected N";
+- the robot refuses the step (ERROR message): "robot refused step N: <its message>".
+
+Every failure makes doStep return fmi2Discard (see BridgePlant.py). The first three also break
+the link: the bridge refuses every later step (the robot may or may not have taken the lost step,
+so the lock-step pairing is gone). At initialization the bridge
+resends INIT every 0.1 s until `init_timeout_s` (the robot may still be starting).
+
+Standard library only (it runs inside the FMU).
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from bridge_model import protocol
+from impedance_cosim.arm import ArmParams, _p, check_fields
+from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
+from impedance_cosim.fmi.variables import Variable, parameters_of, vector
+from impedance_cosim.wall import WallParams
+
+INPUTS = ("tau1", "tau2", "tau3")
+RESEND_S = 0.1
+
+
+@dataclass(frozen=True)
+class PlantSetup:
+    """A copy of plant_model.model.PlantSetup (the bridge bundles no plant code; a test checks
+    that the bridge's plant interface equals PumaPlant's)."""
+
+    x0: float = _p(0.3, "m", "Initial end-effector x (arm at rest)")
+    y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
+    phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
+    elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
+    q_quant: float = _p(0.0, "rad", "Joint encoder resolution (0: no quantization)", 0.0)
+    q_noise: float = _p(0.0, "rad", "Std. dev. of Gaussian joint-angle noise (0: none)", 0.0)
+    noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
+    rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
+    atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)
+
+
+@dataclass(frozen=True)
+class BridgeSetup:
+    """Where the robot process is and how long to wait for it."""
+
+    robot_host: str = field(
+        default="127.0.0.1", metadata={"description": "Robot process address (IPv4)"}
+    )
+    robot_port: int = _p(50400, "", "Robot process UDP port", 1)
+    timeout_s: float = _p(0.05, "s", "Per-step timeout waiting for the robot's reply", 0.0)
+    init_timeout_s: float = _p(2.0, "s", "Time the robot has to answer the first INIT", 0.0)
+
+
+def plant_variables() -> list[Variable]:
+    """PumaPlant's variable table (parameters, inputs, outputs), in its order."""
+    return [
+        *parameters_of(ArmParams()),
+        *parameters_of(WallParams()),
+        *parameters_of(PlantSetup()),
+        *vector(list(INPUTS), "input", "N.m", "Joint {i} motor torque"),
+        *vector(["q1", "q2", "q3"], "output", "rad", "Joint {i} angle, measured (encoder)"),
+        Variable("fx", "output", 0.0, "Wrist F/T sensor: force on the environment, x", "N"),
+        Variable("fy", "output", 0.0, "Wrist F/T sensor: force on the environment, y", "N"),
+        Variable("n", "output", 0.0, "Wrist F/T sensor: moment about the tool point", "N.m"),
+        *vector(["q1_true", "q2_true", "q3_true"], "output", "rad", "Joint {i} angle, truth"),
+        *vector(["qd1", "qd2", "qd3"], "output", "rad/s", "Joint {i} velocity, truth"),
+        Variable("x", "output", 0.0, "End-effector x, truth", "m"),
+        Variable("y", "output", 0.0, "End-effector y, truth", "m"),
+        Variable("phi", "output", 0.0, "End-effector orientation, truth", "rad"),
+        Variable("xd", "output", 0.0, "End-effector x velocity, truth", "m/s"),
+        Variable("yd", "output", 0.0, "End-effector y velocity, truth", "m/s"),
+        Variable("phid", "output", 0.0, "End-effector angular velocity, truth", "rad/s"),
+        Variable("contact_force", "output", 0.0, "Normal force on the wall (>= 0)", "N"),
+        Variable("penetration", "output", 0.0, "Depth of the tool point in the wall", "m"),
+    ]
+
+
+PLANT_PARAMETERS = [v for v in plant_variables() if v.causality == "parameter"]
+PLANT_OUTPUTS = [v.name for v in plant_variables() if v.causality == "output"]
+
+
+class LinkError(ModelError):
+    """The link to the robot failed (timeout, robot gone, out of sequence): the bridge is done."""
+
+
+class BridgeModel(FmuModel):
+    """PumaPlant's interface, answered by an external robot process (see module docstring)."""
+
+    MODEL_NAME = "BridgePlant"
+    DESCRIPTION = (
+        "Hardware-in-the-loop bridge with PumaPlant's interface: sends the joint torques to an"
+        " external robot process over UDP each step and returns the outputs it reports"
+    )
+    OUTPUT_DEPENDENCIES = ""
+
+    @classmethod
+    def variables(cls) -> list[Variable]:
+        return [
+            *plant_variables(),
+            *parameters_of(BridgeSetup()),
+            Variable("link_rtt", "output", 0.0, "Round-trip time of the last exchange", "s"),
+            Variable("robot_t", "output", 0.0, "The robot's time in its last reply", "s"),
+        ]
+
+    def __init__(self, parameters: dict[str, Any], start_time: float = 0.0, inputs=None) -> None:
+        try:
+            self.setup = build_params(BridgeSetup, parameters)
+            check_fields(self.setup)
+            plant = [float(parameters.get(v.name, v.start)) for v in PLANT_PARAMETERS]
+        except (TypeError, ValueError) as exc:
+            raise ModelError(str(exc)) from None
+        self.where = f"{self.setup.robot_host}:{self.setup.robot_port}"
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.connect((self.setup.robot_host, self.setup.robot_port))
+        except OSError as exc:
+            self.sock.close()
+            raise ModelError(f"cannot reach the robot process at {self.where}: {exc}") from None
+        self.t = float(start_time)
+        self.seq = 0
+        self.answered = -1
+        self.failed: str | None = None
+        reply = self._request(protocol.INIT, self.t, 0.0, plant, self.setup.init_timeout_s, True)
+        self._take(reply)
+        self.rtt = 0.0  # outputs at initialization do not depend on the exchange's timing
+
+    def __del__(self) -> None:
+        sock = getattr(self, "sock", None)
+        if sock is not None:
+            sock.close()
+
+    # --- the exchange ---------------------------------------------------------------------------
+
+    def _request(self, kind: int, t: float, h: float, values, timeout: float, resend: bool):
+        """Send one request (seq = self.seq) and return its reply; LinkError on failure."""
+        seq = self.seq
+        data = protocol.pack(kind, seq, t, h, values)
+        start = time.perf_counter()
+        deadline = start + timeout
+        refused = False
+        self._send(data)
+        next_send = start + RESEND_S
+        while True:
+            now = time.perf_counter()
+            if now >= deadline:
+                what = protocol.TYPE_NAMES[kind]
+                cause = (
+                    f"robot process not reachable at {self.where} (connection refused)"
+                    if refused
+                    else f"timeout after {1e3 * timeout:g} ms waiting for the reply to {what}"
+                    f" sequence {seq} from {self.where}"
+                )
+                raise LinkError(cause)
+            wait = deadline - now
+            if resend:
+                wait = min(wait, max(next_send - now, 1e-4))
+            self.sock.settimeout(wait)
+            try:
+                raw = self.sock.recv(65536)
+            except TimeoutError:
+                if resend and time.perf_counter() >= next_send:
+                    next_send += RESEND_S
+                    self._send(data)
+                continue
+            except ConnectionRefusedError:
+                # Loopback: the robot's port is closed (process not started, or gone).
+                if not resend:
+                    raise LinkError(
+                        f"robot process not reachable at {self.where} (connection refused)"
+                        f" while waiting for sequence {seq}"
+                    ) from None
+                refused = True
+                time.sleep(min(RESEND_S, max(0.0, deadline - time.perf_counter())))
+                next_send = time.perf_counter()
+                continue
+            try:
+                msg = protocol.Message(raw)
+            except protocol.ProtocolError:
+                continue  # not ours: dropped
+            if msg.seq <= self.answered:
+                continue  # a duplicate reply to a resent request
+            if msg.seq != seq:
+                raise LinkError(f"reply had sequence {msg.seq}, expected {seq} (from {self.where})")
+            if msg.kind == protocol.ERROR:
+                self.answered = seq
+                raise ModelError(f"robot refused {protocol.TYPE_NAMES[kind]} {seq}: {msg.text}")
+            if msg.kind != kind + 1 or len(msg.values) != len(PLANT_OUTPUTS):
+                raise LinkError(
+                    f"reply to sequence {seq} is a {msg.name} with {len(msg.values)} values,"
+                    f" expected a {protocol.TYPE_NAMES[kind + 1]} with {len(PLANT_OUTPUTS)}"
+                )
+            self.answered = seq
+            self.rtt = time.perf_counter() - start
+            return msg
+
+    def _send(self, data: bytes) -> None:
+        try:
+            self.sock.send(data)
+        except ConnectionRefusedError:
+            pass  # reported by the receive (or its timeout)
+        except OSError as exc:
+            raise LinkError(f"cannot send to the robot process at {self.where}: {exc}") from None
+
+    def _take(self, msg: protocol.Message) -> None:
+        self.values = msg.values
+        self.robot_t = msg.t
+
+    # --- FmuModel -------------------------------------------------------------------------------
+
+    def do_step(self, t: float, h: float, inputs: tuple) -> None:
+        if self.failed:
+            raise LinkError(f"the link to the robot failed earlier ({self.failed})")
+        check_finite_inputs(INPUTS, inputs)
+        if not (h > 0.0 and math.isfinite(h)):
+            raise ModelError(f"communication step must be > 0 and finite (got {h})")
+        self.seq += 1
+        try:
+            msg = self._request(protocol.STEP, t, h, inputs, self.setup.timeout_s, False)
+        except LinkError as exc:
+            self.failed = str(exc)
+            raise
+        self._take(msg)
+        self.t = t + h
+
+    def outputs(self) -> tuple:
+        return (*self.values, self.rtt, self.robot_t)
+
+    def get_state(self) -> dict[str, Any]:
+        return {"t": self.t, "seq": self.seq, "values": list(self.values)}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        raise ModelError("the bridge cannot restore the robot's state (no rollback of hardware)")

@@ -1,0 +1,184 @@
+"""Parameter sweeps: a small sweep on a 2-worker LocalCluster equals single runs of the same
+parameters, failures are rows, and bad input fails before any work starts."""
+
+from __future__ import annotations
+
+import time
+
+import psutil
+import pytest
+
+from impedance_cosim import sweep
+from impedance_cosim.cli import main
+from impedance_cosim.master import Master
+from impedance_cosim.ssp import read_ssp
+
+
+@pytest.fixture(scope="module")
+def native_ssp(native_dir):
+    return native_dir.parent / "PaperScenario-native.ssp"  # built beside the Python one
+
+
+def _children() -> set[int]:
+    """Child processes, less multiprocessing's resource tracker (one per process, by design)."""
+    return {p.pid for p in psutil.Process().children(recursive=True)
+            if "resource_tracker" not in " ".join(p.cmdline())}  # fmt: skip
+
+
+def test_dask_sweep_equals_single_runs(native_ssp, tmp_path, capsys):
+    before = _children()
+    out = tmp_path / "sweep"
+    args = [
+        "sweep",
+        "--ssp",
+        str(native_ssp),
+        "--workers",
+        "2",
+        "--stop",
+        "4.5",
+        "--out",
+        str(out),
+        "--grid",
+        "system.algorithm=gauss-seidel,jacobi",
+        "--grid",
+        "system.scenario=observer,difference",
+        "--set",
+        "plant.q_noise=1e-4",
+        "--plot",
+        "peak_torque_N_m",
+        "--no-progress",
+    ]
+    assert main(args) == 0
+    assert "4 runs" in capsys.readouterr().out
+    assert _children() <= before  # the LocalCluster's worker processes are gone
+    rows = sweep.read_table(out / "sweep.csv")
+    assert (out / "sweep_peak_torque_N_m.png").stat().st_size > 5_000
+    system = read_ssp(native_ssp)
+    for row in rows:
+        result = Master(
+            system,
+            parameter_set=row["system.scenario"],
+            algorithm=row["system.algorithm"],
+            stop_time=4.5,
+            overrides={"plant.q_noise": 1e-4},
+        ).run()
+        if result.ok:
+            expected = sweep.run_metrics(result)
+            assert row["status"] == "ok" and row["error"] is None
+            assert {m: row[m] for m in sweep.METRICS} == expected  # identical, not just close
+        else:
+            assert row["status"] == "diverged" and row["error"] == result.error
+            assert row["t_end_s"] == result.data[-1, 0]
+    status = {(r["system.algorithm"], r["system.scenario"]): r["status"] for r in rows}
+    assert status == {
+        ("gauss-seidel", "observer"): "ok",
+        ("gauss-seidel", "difference"): "ok",
+        ("jacobi", "observer"): "ok",
+        ("jacobi", "difference"): "diverged",
+    }
+    ok = next(r for r in rows if r["status"] == "ok")
+    assert 40 < ok["impact_peak_N"] < 200 and ok["contact_start_s"] == pytest.approx(3.85)
+
+
+def test_serial_rows_and_failed_runs_are_rows(native_ssp):
+    plan = sweep.plan_sweep(
+        ["controller.velocity_source=observer,bogus", "system.rate=400"], ssp=native_ssp, stop=0.5
+    )
+    rows = sweep.run_serial(plan)
+    assert [r["status"] for r in rows] == ["ok", "failed"]
+    assert rows[1]["error"] and rows[0]["peak_torque_N_m"] > 0
+
+
+def test_pseudo_parameters_map_to_the_master():
+    options = {"plant_friction": [27.4, 4.54, 5.0], "stop": 2.0}
+    args = sweep.master_arguments(
+        {
+            "system.rate": 200,
+            "system.friction_scale": 2,
+            "system.encoder_bits": 12,
+            "system.algorithm": "jacobi",
+            "system.scenario": "difference",
+            "controller.K": 10,
+        },
+        options,
+    )
+    assert args["step_size"] == 0.005 and args["overrides"]["controller.sample_period"] == 0.005
+    assert args["overrides"]["plant.f2"] == 9.08 and args["overrides"]["controller.K"] == 10
+    assert args["overrides"]["plant.q_quant"] == pytest.approx(2 * 3.141592653589793 / 4096)
+    assert args["algorithm"] == "jacobi" and args["parameter_set"] == "difference"
+
+
+def test_grid_syntax():
+    assert sweep.parse_axis("system.rate=100,200")[1] == [100, 200]
+    assert sweep.parse_axis("plant.q_noise=log:1e-5:1e-3:3")[1] == pytest.approx([1e-5, 1e-4, 1e-3])
+    assert sweep.parse_axis("controller.K=range:1:2")[1] == ("range", 1.0, 2.0)
+
+
+def test_random_sample_is_seeded(native_ssp):
+    kw = {"ssp": native_ssp, "random_runs": 5, "stop": 1.0}
+    a = sweep.plan_sweep(["controller.K=logrange:5:500", "system.rate=100,200,400"], **kw)
+    b = sweep.plan_sweep(["controller.K=logrange:5:500", "system.rate=100,200,400"], **kw)
+    assert a.points == b.points and len(a.points) == 5
+    assert all(5 <= p["controller.K"] <= 500 for p in a.points)
+
+
+@pytest.fixture
+def no_cluster(monkeypatch):
+    """Fail the test if a LocalCluster or a Client would be started."""
+    import distributed
+
+    def refuse(*_a, **_k):
+        raise AssertionError("a cluster was started for bad input")
+
+    monkeypatch.setattr(distributed, "LocalCluster", refuse)
+    monkeypatch.setattr(distributed, "Client", refuse)
+
+
+@pytest.mark.parametrize(
+    "grid, message",
+    [
+        (["controller.Kx=1,2"], "unknown parameter 'controller.Kx'; did you mean controller.K"),
+        (["plant.noise_sd=0,1e-4"], "did you mean"),
+        (["plant.x=0.3"], "plant.x is an output, not a parameter"),
+        (["controller.K="], "empty grid for controller.K"),
+        (["controller.K=lin:1:2:0"], "needs a count >= 1"),
+        ([], "nothing to sweep"),
+        (["system.rate=333"], "not a whole number of"),
+        (["system.rate=0"], "system.rate must be a positive number"),
+        (["system.scenario=observer,nope"], "system.scenario must be one of"),
+        (["plant.q_noise=abc"], "'abc' is not a valid Real"),
+        (["controller.K=1", "controller.K=2"], "swept twice"),
+        (["controller.K=range:1:2"], "is for --random sweeps"),
+    ],
+)
+def test_bad_input_fails_before_any_work(native_ssp, tmp_path, capsys, no_cluster, grid, message):
+    args = ["sweep", "--ssp", str(native_ssp), "--stop", "1.5", "--out", str(tmp_path / "o")]
+    assert main([*args, *(a for g in grid for a in ("--grid", g))]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_unreachable_scheduler_fails_fast(native_ssp, tmp_path, capsys, no_cluster):
+    started = time.perf_counter()
+    code = main(
+        [
+            "sweep",
+            "--ssp",
+            str(native_ssp),
+            "--grid",
+            "controller.K=10,50",
+            "--scheduler",
+            "tcp://127.0.0.1:1",
+            "--connect-timeout",
+            "1",
+            "--out",
+            str(tmp_path / "o"),
+        ]
+    )
+    assert code == 2 and time.perf_counter() - started < 3.0
+    err = capsys.readouterr().err
+    assert "cannot reach the dask scheduler at tcp://127.0.0.1:1" in err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(sweep.SweepError, match="cannot reach"):
+        sweep.check_scheduler("tcp://127.0.0.1:1", timeout=0.5)

@@ -18,7 +18,7 @@ the link: the bridge refuses every later step (the robot may or may not have tak
 so the lock-step pairing is gone). At initialization the bridge
 resends INIT every 0.1 s until `init_timeout_s` (the robot may still be starting).
 
-Standard library only (it runs inside the FMU).
+Standard library only (it runs inside the FMU, which bundles plant_model for the interface).
 """
 
 from __future__ import annotations
@@ -30,29 +30,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridge_model import protocol
-from impedance_cosim.arm import ArmParams, _p, check_fields
+from impedance_cosim.arm import _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import Variable, parameters_of, vector
-from impedance_cosim.wall import WallParams
+from impedance_cosim.fmi.variables import Variable, parameters_of
+from plant_model.model import INPUTS, PlantModel
 
-INPUTS = ("tau1", "tau2", "tau3")
 RESEND_S = 0.1
-
-
-@dataclass(frozen=True)
-class PlantSetup:
-    """A copy of plant_model.model.PlantSetup (the bridge bundles no plant code; a test checks
-    that the bridge's plant interface equals PumaPlant's)."""
-
-    x0: float = _p(0.3, "m", "Initial end-effector x (arm at rest)")
-    y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
-    phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
-    elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
-    q_quant: float = _p(0.0, "rad", "Joint encoder resolution (0: no quantization)", 0.0)
-    q_noise: float = _p(0.0, "rad", "Std. dev. of Gaussian joint-angle noise (0: none)", 0.0)
-    noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
-    rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
-    atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)
 
 
 @dataclass(frozen=True)
@@ -69,26 +52,7 @@ class BridgeSetup:
 
 def plant_variables() -> list[Variable]:
     """PumaPlant's variable table (parameters, inputs, outputs), in its order."""
-    return [
-        *parameters_of(ArmParams()),
-        *parameters_of(WallParams()),
-        *parameters_of(PlantSetup()),
-        *vector(list(INPUTS), "input", "N.m", "Joint {i} motor torque"),
-        *vector(["q1", "q2", "q3"], "output", "rad", "Joint {i} angle, measured (encoder)"),
-        Variable("fx", "output", 0.0, "Wrist F/T sensor: force on the environment, x", "N"),
-        Variable("fy", "output", 0.0, "Wrist F/T sensor: force on the environment, y", "N"),
-        Variable("n", "output", 0.0, "Wrist F/T sensor: moment about the tool point", "N.m"),
-        *vector(["q1_true", "q2_true", "q3_true"], "output", "rad", "Joint {i} angle, truth"),
-        *vector(["qd1", "qd2", "qd3"], "output", "rad/s", "Joint {i} velocity, truth"),
-        Variable("x", "output", 0.0, "End-effector x, truth", "m"),
-        Variable("y", "output", 0.0, "End-effector y, truth", "m"),
-        Variable("phi", "output", 0.0, "End-effector orientation, truth", "rad"),
-        Variable("xd", "output", 0.0, "End-effector x velocity, truth", "m/s"),
-        Variable("yd", "output", 0.0, "End-effector y velocity, truth", "m/s"),
-        Variable("phid", "output", 0.0, "End-effector angular velocity, truth", "rad/s"),
-        Variable("contact_force", "output", 0.0, "Normal force on the wall (>= 0)", "N"),
-        Variable("penetration", "output", 0.0, "Depth of the tool point in the wall", "m"),
-    ]
+    return PlantModel.variables()
 
 
 PLANT_PARAMETERS = [v for v in plant_variables() if v.causality == "parameter"]

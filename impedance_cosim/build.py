@@ -32,6 +32,7 @@ class FmuSpec:
     package: str  # e.g. plant_model
     script: str  # slave script file in the package, e.g. PumaPlant.py
     model_class: str  # dotted path of the FmuModel class
+    uses: tuple[str, ...] = ()  # other model packages bundled with it (their code, not slaves)
 
     @property
     def model_name(self) -> str:
@@ -50,7 +51,13 @@ FMUS = {
         "ImpedanceController.py",
         "controller_model.model.ControllerModel",
     ),
-    "bridge": FmuSpec("bridge", "bridge_model", "BridgePlant.py", "bridge_model.model.BridgeModel"),
+    "bridge": FmuSpec(
+        "bridge",
+        "bridge_model",
+        "BridgePlant.py",
+        "bridge_model.model.BridgeModel",
+        uses=("plant_model",),  # the plant's interface, defined once in plant_model.model
+    ),
 }
 
 
@@ -82,10 +89,13 @@ def build_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT) -> Path:
                 core.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(src, core / item)
         _stage(package_dir, stage / spec.package, skip={spec.script})
+        slaves = {s.script for s in FMUS.values()}
+        for package in spec.uses:
+            _stage(REPO / package, stage / package, skip=slaves)
         raw = FmuBuilder.build_FMU(
             package_dir / spec.script,
             dest=Path(tmp) / "raw",
-            project_files=[core, stage / spec.package],
+            project_files=[core, stage / spec.package, *(stage / p for p in spec.uses)],
             needsExecutionTool="false",
         )
         target = out_dir / f"{spec.model_name}.fmu"

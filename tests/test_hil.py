@@ -18,13 +18,11 @@ import numpy as np
 import pytest
 
 from bridge_model import protocol
-from bridge_model.model import BridgeModel, plant_variables
 from impedance_cosim import analysis
 from impedance_cosim.cli import main
 from impedance_cosim.hil import Fault, replacement_problems, start_robot, stop_robot
 from impedance_cosim.master import RT_COLUMNS, Master
 from impedance_cosim.ssp import read_ssp
-from plant_model.model import PlantModel
 
 
 @pytest.fixture(scope="module")
@@ -62,11 +60,19 @@ def bridged(system, bridge, port, stop, **kw):
 # --- the bridge's interface and protocol ---------------------------------------------------------
 
 
-def test_bridge_has_the_plants_interface():
-    """The bridge bundles no plant code: its copy of PumaPlant's table must stay equal."""
-    assert plant_variables() == PlantModel.variables()
-    names = [v.name for v in BridgeModel.variables()]
-    assert names[: len(plant_variables())] == [v.name for v in PlantModel.variables()]
+def test_bridge_has_the_plants_interface(fmu_dir):
+    """The built bridge FMU declares PumaPlant's variables first, with the same value references,
+    causality, units and start values (plus its own link parameters and outputs)."""
+    from fmpy import read_model_description
+
+    def table(path):
+        md = read_model_description(str(path))
+        return [(v.name, v.valueReference, v.causality, v.type, v.unit, v.start)
+                for v in md.modelVariables]  # fmt: skip
+
+    plant, bridge = table(fmu_dir / "PumaPlant.fmu"), table(fmu_dir / "BridgePlant.fmu")
+    assert bridge[: len(plant)] == plant
+    assert {"robot_port", "timeout_s", "link_rtt"} <= {v[0] for v in bridge[len(plant) :]}
 
 
 def test_protocol_round_trip_and_rejections():

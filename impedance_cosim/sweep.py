@@ -44,7 +44,11 @@ from typing import Any
 import numpy as np
 
 from impedance_cosim.master import ALGORITHMS, Master, MasterError, RunResult
-from impedance_cosim.sweep_table import parse_value, read_table  # noqa: F401 (read_table: API)
+from impedance_cosim.sweep_table import (  # noqa: F401 (read_table: API)
+    parse_value,
+    read_table,
+    save_figure,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_SSP = REPO / "fmus" / "PaperScenario-native.ssp"
@@ -761,7 +765,7 @@ def plot_map(
             ax.set_xscale("log")
         ax.set_xlabel(x)
         ax.set_title(title, fontsize=10)
-        fig.savefig(path, dpi=90)
+        save_figure(fig, path, dpi=90)
         plt.close(fig)
         return
 
@@ -825,7 +829,7 @@ def plot_map(
     fig.suptitle(f"{title}\nblack, label in red: not bounded (stopped at that time)", fontsize=8)
     if image is not None:
         fig.colorbar(image, ax=grid, label=metric, shrink=0.8)
-    fig.savefig(path, dpi=80)
+    save_figure(fig, path, dpi=80)
     plt.close(fig)
 
 

@@ -70,6 +70,18 @@ def replace_text(path: Path, text: str) -> None:
             tmp.unlink()
 
 
+def save_figure(fig: Any, path: Path, **kwargs: Any) -> None:
+    """fig.savefig to a temporary name beside path, then renamed into place."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        fig.savefig(tmp, **kwargs)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
 def write_table(path: Path, names: Sequence[str], rows: Iterable[dict]) -> None:
     """A whole table (rows numbered 1.. in order, or by their own "run") via a temporary file."""
     lines = [_csv_line(names)]

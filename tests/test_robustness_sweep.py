@@ -113,7 +113,7 @@ def test_signal_stops_a_serial_sweep_keeps_rows_and_resume_finishes_it(
 def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_ssp, tmp_path):
     """2 workers: one is killed after the first rows (its run goes to another worker), then
     Ctrl-C; the table keeps every finished run; --resume (serial) equals a serial sweep."""
-    grid = ["--grid", "controller.K=lin:10:100:30", "--stop", "10", "--ssp", str(native_ssp)]
+    grid = ["--grid", "controller.K=lin:10:100:40", "--stop", "30", "--ssp", str(native_ssp)]
     reference = tmp_path / "ref"
     assert main(["sweep", "--serial", "--no-plots", "--no-progress", "--out", str(reference),
                  *grid]) == 0  # fmt: skip
@@ -130,7 +130,7 @@ def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_ssp, tmp_path):
     wait_rows(proc, table, data_rows(table) + 3)
     proc.send_signal(signal.SIGINT)
     code, _out, err = finish(proc)
-    kept = assert_interrupted(code, err, signal.SIGINT, 30, table)
+    kept = assert_interrupted(code, err, signal.SIGINT, 40, table)
     for row in kept:
         assert strip([row]) == {row["run"]: expected[row["run"]]}
     resumed = subprocess.run(sweep_command("--serial", "--resume", "--out", str(out), *grid),

@@ -423,6 +423,11 @@ class RunInterruptedError(Exception):
     """A run stopped by SIGINT/SIGTERM: no result; the sweep stops (--resume runs it again)."""
 
 
+class RunsLostError(Exception):
+    """Dask cancelled runs (e.g. the scheduler went away): no verdict on those points; the sweep
+    stops after the others (--resume runs them again)."""
+
+
 STOP: dict[str, str | None] = {"signal": None}  # set by the sweep's signal handler (sweep_cli)
 
 
@@ -454,7 +459,7 @@ def run_point(payload: bytes | str, digest: str, point: dict, options: dict) -> 
     except Exception as exc:  # a row, never a crashed sweep
         if STOP["signal"]:  # e.g. a Python FMU turned the KeyboardInterrupt into an FMI error
             raise RunInterruptedError(f"interrupted ({STOP['signal']})") from None
-        row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+        row.update(status="failed", error=" ".join(f"{type(exc).__name__}: {exc}".split()))
     row["wall_s"] = time.perf_counter() - started
     return row
 
@@ -570,8 +575,12 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
             raise SweepError(
                 f"cannot connect to the dask scheduler at {scheduler}: {exc}"
             ) from None
-        with client:
-            yield client
+        logging.disable(logging.CRITICAL)  # a lost scheduler: our one line, not dask's tracebacks
+        try:
+            with client:
+                yield client
+        finally:
+            logging.disable(logging.NOTSET)
         return
     import dask
 
@@ -603,6 +612,8 @@ def run_dask(
     """The plan's runs (or those at `indices`) as tasks on the client's workers; rows in the
     plan's order; `record(index, row)` as each finishes. On an exception (e.g. Ctrl-C) the
     runs not yet finished are cancelled."""
+    from concurrent.futures import CancelledError
+
     from distributed import as_completed
 
     order = list(range(len(plan.points)) if indices is None else indices)
@@ -615,6 +626,7 @@ def run_dask(
     ]
     index = {f.key: i for f, i in zip(futures, order)}
     rows: dict[int, dict] = {}
+    lost: list[str] = []
     try:
         for future in as_completed(futures):
             i = index[future.key]
@@ -622,9 +634,13 @@ def run_dask(
                 row = future.result()
             except RunInterruptedError:  # a worker's run was stopped by a signal: stop the sweep
                 raise
+            except CancelledError as exc:  # e.g. the scheduler went away: not the point's fault
+                lost.append(" ".join(str(exc).split()))
+                continue
             except Exception as exc:  # the worker died (e.g. a crash inside an FMU)
                 row = dict(plan.points[i])
-                row.update(status="failed", error=f"task failed: {type(exc).__name__}: {exc}")
+                reason = " ".join(str(exc).split())
+                row.update(status="failed", error=f"task failed: {type(exc).__name__}: {reason}")
                 row.update({m: None for m in METRICS}, wall_s=None)
             rows[i] = row
             if record:
@@ -632,8 +648,10 @@ def run_dask(
             if progress:
                 progress(len(rows), row)
     finally:
-        if len(rows) < len(order):
+        if len(rows) + len(lost) < len(order):
             client.cancel([f for f in futures if not f.done()])
+    if lost:
+        raise RunsLostError(f"dask lost {len(lost)} of {len(order)} runs ({lost[0]})")
     return [rows[i] for i in order]
 
 

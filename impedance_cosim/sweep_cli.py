@@ -27,6 +27,7 @@ from impedance_cosim.sweep import (
     STUDY,
     ProgressBar,
     RunInterruptedError,
+    RunsLostError,
     SweepError,
     _label,
     check_scheduler,
@@ -198,24 +199,30 @@ def _check_options(args: argparse.Namespace) -> None:
         raise SweepError(f"the grid has {runs:.3g} runs, more than {MAX_RUNS}: fewer values")
 
 
+def _kept(tables: list) -> str:
+    """How far the sweep got and how to finish it."""
+    finished = sum(len(t.done) for t in tables)
+    total = sum(len(t.points) for t in tables)
+    where = ", ".join(str(t.path) for t in tables)
+    return (
+        f"{finished} of {total} runs finished, kept in {where}; to finish, run the same command "
+        "with --resume"
+    )
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     _check_options(args)
     tables: list = []  # the tables opened so far (for the line on an interruption)
     with stop_on_signals():
         try:
             return _sweep(args, tables)
+        except RunsLostError as exc:
+            print(f"impedance-cosim sweep: error: {exc}; {_kept(tables)}", file=sys.stderr)
+            return 1
         except (KeyboardInterrupt, RunInterruptedError) as exc:
             signum = getattr(exc, "signum", None)  # the master's own interruption carries it
             name = sweep.STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
-            finished = sum(len(t.done) for t in tables)
-            total = sum(len(t.points) for t in tables)
-            where = ", ".join(str(t.path) for t in tables)
-            news = (
-                f"{finished} of {total} runs finished, kept in {where}; to finish, run the same "
-                "command with --resume"
-                if tables
-                else "before any run started"
-            )
+            news = _kept(tables) if tables else "before any run started"
             lead = "\n" if sys.stderr.isatty() else ""
             print(f"{lead}impedance-cosim sweep: interrupted by {name}: {news}", file=sys.stderr)
             return 128 + getattr(signal, name, signal.SIGINT)

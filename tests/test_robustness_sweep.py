@@ -110,16 +110,30 @@ def test_signal_stops_a_serial_sweep_keeps_rows_and_resume_finishes_it(
     assert all(wall[r["run"]] == r["wall_s"] for r in kept)  # kept runs were not run again
 
 
-def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_ssp, tmp_path):
+@pytest.fixture(scope="module")
+def native_ssp(native_dir):
+    return native_dir.parent / "PaperScenario-native.ssp"
+
+
+@pytest.fixture(scope="module")
+def native_grid(native_ssp) -> list[str]:
+    return ["--grid", "controller.K=lin:10:100:40", "--stop", "30", "--ssp", str(native_ssp)]
+
+
+@pytest.fixture(scope="module")
+def native_reference(native_grid, tmp_path_factory) -> dict[int, dict]:
+    """The uninterrupted serial sweep of native_grid."""
+    out = tmp_path_factory.mktemp("native_reference")
+    args = ["sweep", "--serial", "--no-plots", "--no-progress", "--out", str(out)]
+    assert main([*args, *native_grid]) == 0
+    return strip(read_table(out / "sweep.csv"))
+
+
+def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_grid, native_reference, tmp_path):
     """2 workers: one is killed after the first rows (its run goes to another worker), then
     Ctrl-C; the table keeps every finished run; --resume (serial) equals a serial sweep."""
-    grid = ["--grid", "controller.K=lin:10:100:40", "--stop", "30", "--ssp", str(native_ssp)]
-    reference = tmp_path / "ref"
-    assert main(["sweep", "--serial", "--no-plots", "--no-progress", "--out", str(reference),
-                 *grid]) == 0  # fmt: skip
-    expected = strip(read_table(reference / "sweep.csv"))
     out = tmp_path / "o"
-    proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *grid),
+    proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *native_grid),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     table = out / "sweep.csv"
     wait_rows(proc, table, 2)
@@ -132,16 +146,54 @@ def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_ssp, tmp_path):
     code, _out, err = finish(proc)
     kept = assert_interrupted(code, err, signal.SIGINT, 40, table)
     for row in kept:
-        assert strip([row]) == {row["run"]: expected[row["run"]]}
-    resumed = subprocess.run(sweep_command("--serial", "--resume", "--out", str(out), *grid),
-                             capture_output=True, text=True)  # fmt: skip
+        assert strip([row]) == {row["run"]: native_reference[row["run"]]}
+    resume = sweep_command("--serial", "--resume", "--out", str(out), *native_grid)
+    resumed = subprocess.run(resume, capture_output=True, text=True)
     assert resumed.returncode == 0, resumed.stderr
-    assert strip(read_table(table)) == expected
+    assert strip(read_table(table)) == native_reference
 
 
-@pytest.fixture(scope="module")
-def native_ssp(native_dir):
-    return native_dir.parent / "PaperScenario-native.ssp"
+def test_a_lost_scheduler_keeps_the_rows_and_says_so(native_grid, native_reference, tmp_path):
+    """A scheduler that goes away mid-sweep: on main its cancelled runs became `failed` rows
+    (skipped by a resume) with dask's tracebacks and exit 0; now one line, exit 1, no row."""
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+         "--port", "0", "--no-dashboard"], stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    worker = None
+    try:
+        address = None
+        while address is None:
+            line = scheduler.stderr.readline()
+            assert line, "the scheduler did not start"
+            if "Scheduler at:" in line:
+                address = line.split()[-1]
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+             "--no-nanny", "--no-dashboard"], stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        out = tmp_path / "o"
+        args = ["--scheduler", address, "--out", str(out), *native_grid]
+        proc = subprocess.Popen(sweep_command(*args), stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)  # fmt: skip
+        table = out / "sweep.csv"
+        wait_rows(proc, table, 3)
+        scheduler.kill()
+        code, _out, err = finish(proc)
+    finally:
+        for p in (scheduler, worker):
+            if p is not None:
+                p.kill()
+                p.wait()
+    assert code == 1 and err.count("\n") == 1 and "Traceback" not in err, err
+    rows = read_table(table)
+    assert f"dask lost {40 - len(rows)} of 40 runs" in err
+    assert f"{len(rows)} of 40 runs finished, kept in {table}" in err and "--resume" in err
+    assert all(strip([r]) == {r["run"]: native_reference[r["run"]]} for r in rows)
+    resume = sweep_command("--serial", "--resume", "--out", str(out), *native_grid)
+    resumed = subprocess.run(resume, capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    assert strip(read_table(table)) == native_reference
 
 
 # --- the table: resume checks, torn rows, a second sweep ------------------------------------

@@ -202,16 +202,20 @@ class SweepTable:
         self._stack = contextlib.ExitStack()
 
     def __enter__(self) -> SweepTable:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._stack.enter_context(_lock(self.path.with_name(self.path.name + ".lock")))
         try:
-            self._load()
-            replace_text(plan_path(self.path), json.dumps(self.plan, indent=1) + "\n")
-            self._rewrite()
-            self._file = open(self.path, "a", newline="")
-        except BaseException:
-            self._stack.close()
-            raise
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._stack.enter_context(_lock(self.path.with_name(self.path.name + ".lock")))
+            try:
+                self._load()
+                replace_text(plan_path(self.path), json.dumps(self.plan, indent=1) + "\n")
+                self._rewrite()
+                self._file = open(self.path, "a", newline="")
+            except BaseException:
+                self._stack.close()
+                raise
+        except OSError as exc:  # before any run: one line, nothing lost
+            where = exc.filename or self.path
+            raise TableError(f"cannot write the table in {where}: {exc.strerror or exc}") from None
         return self
 
     def __exit__(self, *exc) -> None:
@@ -226,10 +230,13 @@ class SweepTable:
         """Append the row of the plan's point `index` (0-based) and flush it to the OS."""
         cells = row_cells(self.names, index + 1, row)
         self.cells[index + 1] = cells
-        self._file.write(_csv_line(cells))
-        self._file.flush()
         if row.get("status") in FINISHED:
             self.done.add(index)
+        try:
+            self._file.write(_csv_line(cells))
+            self._file.flush()
+        except OSError as exc:  # e.g. a full disk: stop the sweep with one line
+            raise TableError(f"cannot write {self.path}: {exc.strerror or exc}") from None
 
     def rows(self) -> list[dict[str, Any]]:
         """The rows so far in the plan's order, parsed as read_table parses them."""

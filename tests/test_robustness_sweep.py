@@ -418,7 +418,10 @@ def test_bad_sweep_input_is_one_line(
 
 def test_out_naming_a_file_is_one_line(native_ssp, tmp_path, capsys):
     (tmp_path / "f").write_text("x")
-    args = ["sweep", "--ssp", str(native_ssp), "--grid", "controller.K=1", "--out"]
+    args = ["sweep", "--ssp", str(native_ssp), "--grid", "controller.K=1", "--stop", "0.5", "--out"]
     assert main([*args, str(tmp_path / "f")]) == 2
     err = capsys.readouterr().err
     assert "is a file, not a folder" in err and err.count("\n") == 1
+    assert main([*args, str(tmp_path / "f" / "sub")]) == 2  # a folder that cannot be made
+    err = capsys.readouterr().err
+    assert f"cannot write the table in {tmp_path / 'f'}" in err and err.count("\n") == 1

@@ -84,11 +84,13 @@ def note_missing(toolchain: Toolchain) -> None:
     )
 
 
-def compile_library(toolchain: Toolchain, src: Path, c_files: list[str], out: Path) -> None:
+def compile_library(
+    toolchain: Toolchain, src: Path, c_files: list[str], out: Path, extra: tuple[str, ...] = ()
+) -> None:
     """Compile the C files in folder src into the shared library out (run inside src, on
     relative names, so the build folder's path never reaches the binary: MinGW's linker, for
     one, derives the DLL's image base from the output path)."""
-    cmd = [toolchain.compiler, *CFLAGS, *toolchain.flags, "-shared", "-I.", *c_files,
+    cmd = [toolchain.compiler, *CFLAGS, *toolchain.flags, *extra, "-shared", "-I.", *c_files,
            *toolchain.libs, "-o", os.path.relpath(out, src)]  # fmt: skip
     try:
         done = subprocess.run(cmd, cwd=src, capture_output=True, text=True)

@@ -211,6 +211,20 @@ def test_win64_dll_imports_only_the_system_c_runtime(native_dir, tmp_path, name)
     assert data[pe + 8 : pe + 12] == bytes(4)  # TimeDateStamp 0: no build time in the DLL
 
 
+@pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+def test_sources_compile_without_warnings(platform, native_dir, tmp_path):
+    """The FMUs' own sources/ compile with -Werror for the platform (same flags as linux64)."""
+    toolchain = need_compiler(platform)
+    for name in (PLANT, CONTROLLER):
+        with zipfile.ZipFile(native_dir / name) as z:
+            z.extractall(tmp_path / name)
+        src = tmp_path / name / "sources"
+        c_files = sorted(p.name for p in src.glob("*.c"))
+        out = tmp_path / name / f"x{toolchain.suffix}"
+        toolchains.compile_library(toolchain, src, c_files, out, extra=("-Werror",))
+        assert out.stat().st_size > 0
+
+
 def test_missing_cross_compilers_are_a_note_not_a_failure(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("IMPCOSIM_CC_WIN64", "no-such-mingw-gcc")
     monkeypatch.setenv("IMPCOSIM_CC_AARCH64", "no-such-aarch64-gcc")

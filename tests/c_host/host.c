@@ -29,7 +29,12 @@ static void *library_symbol(void *lib, const char *name)
     return p;
 }
 static void close_library(void *lib) { FreeLibrary((HMODULE)lib); }
-static const char *library_error(void) { return "LoadLibrary failed"; }
+static const char *library_error(void)
+{
+    static char text[64];
+    snprintf(text, sizeof text, "LoadLibrary failed with error %lu", (unsigned long)GetLastError());
+    return text;
+}
 #else
 #include <dlfcn.h>
 static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }

@@ -25,6 +25,10 @@ from pathlib import Path
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-Wextra")
 
 
+class CompileError(RuntimeError):
+    """A C compiler that is there failed (or vanished): the build stops, naming the platform."""
+
+
 @dataclass(frozen=True)
 class Toolchain:
     """One target platform: its binaries/ folder, compiler, library suffix and extra flags."""
@@ -95,9 +99,12 @@ def compile_library(
     try:
         done = subprocess.run(cmd, cwd=src, capture_output=True, text=True)
     except FileNotFoundError:
-        raise RuntimeError(f"C compiler {toolchain.compiler!r} not found") from None
+        raise CompileError(f"C compiler {toolchain.compiler!r} not found") from None
     if done.returncode != 0:
-        raise RuntimeError(f"compiling {out.name} for {toolchain.platform} failed:\n{done.stderr}")
+        raise CompileError(
+            f"compiling {out.name} for {toolchain.platform} with {toolchain.compiler} failed "
+            f"(exit status {done.returncode}):\n{done.stderr.strip()}"
+        )
 
 
 def build_binaries(src: Path, model_identifier: str, c_files: list[str]) -> dict[str, bytes]:

@@ -245,7 +245,9 @@ def test_missing_cross_compilers_are_a_note_not_a_failure(tmp_path, monkeypatch,
 def test_a_failing_cross_compiler_fails_the_build(tmp_path, monkeypatch):
     """A compiler that is there but fails is an error naming the platform, not a silent gap."""
     monkeypatch.setenv("IMPCOSIM_CC_AARCH64", shutil.which("false") or "false")
-    with pytest.raises(RuntimeError, match="PumaPlant.so for aarch64-linux failed"):
+    with pytest.raises(
+        toolchains.CompileError, match="PumaPlant.so for aarch64-linux with .*false"
+    ):
         build_native_fmu(FMUS["plant"], tmp_path)
     assert not (tmp_path / PLANT).exists()
 

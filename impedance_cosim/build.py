@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import impedance_cosim
+from impedance_cosim import toolchains
 from impedance_cosim.fmi.variables import model_description
 
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
@@ -137,15 +138,6 @@ NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "
                  "ode.c", "ode.h", "pyrandom.c", "pyrandom.h")  # fmt: skip
 NATIVE_MODEL = ("config.h", "model.h", "model.c")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-CFLAGS = [
-    "-std=c99",
-    "-O2",
-    "-fPIC",
-    "-ffp-contract=off",
-    "-fvisibility=hidden",
-    "-Wall",
-    "-Wextra",
-]
 
 
 def _native_sources(spec: FmuSpec) -> dict[str, bytes]:
@@ -167,11 +159,10 @@ def _native_sources(spec: FmuSpec) -> dict[str, bytes]:
 
 
 def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> Path:
-    """Build the native (C99) flavour of an FMU with the machine's C compiler: the same variables
-    as the Python FMU, a binaries/linux64 library and its sources/ (with buildDescription.xml) so
-    tools can rebuild it for another platform."""
+    """Build the native (C99) flavour of an FMU: the same variables as the Python FMU, a library
+    per platform with a compiler here (binaries/linux64, win64, aarch64-linux: see toolchains.py)
+    and its sources/ (with buildDescription.xml) so tools can build it for another platform."""
     import platform
-    import subprocess
 
     cls = spec.load_model_class()
     sources = _native_sources(spec)
@@ -194,22 +185,14 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
         for name, content in sources.items():
             (src / name).write_bytes(content)
         if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
-            raise RuntimeError("the native build targets linux64 (x86_64) only")
-        lib = Path(tmp) / f"{cls.MODEL_NAME}.so"
-        cc = os.environ.get("CC", "gcc")
-        cmd = [cc, *CFLAGS, "-shared", f"-I{src}", *(str(src / f) for f in c_files), "-lm",
-               "-o", str(lib)]  # fmt: skip
-        try:
-            done = subprocess.run(cmd, capture_output=True, text=True)
-        except FileNotFoundError:
-            raise RuntimeError(f"C compiler {cc!r} not found (set CC)") from None
-        if done.returncode != 0:
-            raise RuntimeError(f"compiling {cls.MODEL_NAME} failed:\n{done.stderr}")
+            raise RuntimeError("the native build runs on linux64 (x86_64) only")
+        binaries = toolchains.build_binaries(src, cls.MODEL_NAME, c_files)
         target = out_dir / f"{cls.MODEL_NAME}.fmu"
         tmp_target = target.with_suffix(".fmu.tmp")
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr(_info("modelDescription.xml"), xml(guid))
-            z.writestr(_info(f"binaries/linux64/{cls.MODEL_NAME}.so", 0o755), lib.read_bytes())
+            for name in sorted(binaries):
+                z.writestr(_info(name, 0o755), binaries[name])
             for name in sorted(sources):
                 z.writestr(_info(f"sources/{name}"), sources[name])
         tmp_target.replace(target)

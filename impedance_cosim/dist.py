@@ -82,6 +82,7 @@ def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
                 info.external_attr = 0o644 << 16
                 info.create_system = 3  # Unix, whatever the building machine
                 z.writestr(info, members[name])
+        os.chmod(tmp, 0o644)  # mkstemp made it private
         os.replace(tmp, target)
     finally:
         if os.path.exists(tmp):

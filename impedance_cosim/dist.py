@@ -35,6 +35,7 @@ def reference_results() -> list[Path]:
 def build_dist(dist_dir: Path, out_dir: Path = DEFAULT_OUT) -> Path:
     """Build every FMU and system archive into out_dir, then bundle them into
     dist_dir/impedance-cosim-<version>.zip; return the bundle's path."""
+    Path(dist_dir).mkdir(parents=True, exist_ok=True)  # fail before building, not after
     try:
         built = build_all(Path(out_dir))
     except RuntimeError as exc:  # a failed compile: one message, no traceback
@@ -143,7 +144,11 @@ Licence: BSD-2-Clause, see LICENSE (also inside every FMU, documentation/license
 
 def cmd_dist(args: argparse.Namespace) -> int:
     """`impedance-cosim dist`: build everything and write the bundle."""
-    path = build_dist(Path(args.dir), Path(args.out))
+    try:
+        path = build_dist(Path(args.dir), Path(args.out))
+    except OSError as exc:  # an unwritable or misnamed folder: one line, not a traceback
+        where = exc.filename or args.dir
+        raise ValueError(f"cannot write {where}: {exc.strerror or exc}") from None
     print(f"wrote {path}")
     return 0
 

@@ -95,17 +95,25 @@ COLUMNS = ("name", "valueReference", "causality", "variability", "type", "unit",
            "start", "description")  # fmt: skip
 
 
+def _start(v: dict[str, str]) -> str:
+    """The start value, or how the variable is initialized when it has none (outputs)."""
+    return v["start"] or (f"({v['initial']})" if v["initial"] else "")
+
+
 def _variables_section(root: ET.Element) -> str:
     head = ["name", "value ref.", *COLUMNS[2:]]
     parts = []
-    for causality in ("parameter", "input", "output", "local", "independent"):
+    found = [v["causality"] for v in variables_of(root)]
+    known = ["parameter", "calculatedParameter", "input", "output", "local", "independent"]
+    order = sorted(set(found), key=lambda c: (known.index(c) if c in known else len(known), c))
+    for causality in order:
         rows = [
-            [*(v[k] for k in COLUMNS[:-2]), v["start"] or f"({v['initial']})", v["description"]]
+            [*(v[k] for k in COLUMNS[:-2]), _start(v), v["description"]]
             for v in variables_of(root)
             if v["causality"] == causality
         ]
         if rows:
-            parts.append(f"<h3>{_e(causality.capitalize())}s ({len(rows)})</h3>\n")
+            parts.append(f"<h3>causality {_e(causality)} ({len(rows)})</h3>\n")
             parts.append(_table(head, rows))
     return "".join(parts)
 

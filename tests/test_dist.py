@@ -116,3 +116,12 @@ def test_dist_without_a_compiler_says_so(tmp_path: Path, monkeypatch, capsys):
     assert err[-1].startswith("impedance-cosim dist: error: the bundle is incomplete, missing")
     assert "C compiler" in err[-1]
     assert not (tmp_path / "dist").exists() or not any((tmp_path / "dist").iterdir())
+
+
+def test_dist_into_a_file_says_so(tmp_path: Path, capsys):
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("x")
+    assert main(["dist", str(blocker / "dist"), "--out", str(tmp_path / "fmus")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("impedance-cosim dist: error: cannot write"), err
+    assert "not_a_folder" in err[-1] and "Traceback" not in "".join(err)

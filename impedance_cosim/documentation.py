@@ -24,8 +24,7 @@ EXTERNAL = "documentation/externalDependencies.txt"
 STYLE = """body{font-family:sans-serif;max-width:62em;margin:1em auto;padding:0 1em;line-height:1.4}
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 6px;
 text-align:left;vertical-align:top}th{background:#eee}.eq{margin:.4em 0 .4em 2em;
-font-family:serif;font-size:110%}pre,code{background:#f4f4f4}pre{padding:.4em}
-.num{text-align:right;font-family:monospace}"""
+font-family:serif;font-size:110%}pre,code{background:#f4f4f4}pre{padding:.4em}"""
 
 
 def documentation_members(model_description: bytes, members: list[str], flavour: str) -> dict:

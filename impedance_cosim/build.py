@@ -125,11 +125,12 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
             for name in ["modelDescription.xml", *members]:
                 info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
                 if name != "modelDescription.xml":
-                    info.external_attr = zin.getinfo(name).external_attr
                     zout.writestr(info, zin.read(name))
                 else:
                     zout.writestr(info, xml(guid))
+            _add_documentation(zout, xml(guid), "pythonfmu")
         tmp_target.replace(target)
 
 
@@ -195,6 +196,7 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
                 z.writestr(_info(name, 0o755), binaries[name])
             for name in sorted(sources):
                 z.writestr(_info(f"sources/{name}"), sources[name])
+            _add_documentation(z, xml(guid), "native C99")
         tmp_target.replace(target)
     return target
 
@@ -204,6 +206,15 @@ def _info(name: str, mode: int = 0o644) -> zipfile.ZipInfo:
     info.compress_type = zipfile.ZIP_DEFLATED
     info.external_attr = mode << 16
     return info
+
+
+def _add_documentation(z: zipfile.ZipFile, model_description: bytes, flavour: str) -> None:
+    """Write documentation/ (index.html, the licence) and model.png into an FMU being written,
+    generated from its modelDescription and the members written so far (call it last)."""
+    from impedance_cosim.documentation import documentation_members
+
+    for name, data in documentation_members(model_description, z.namelist(), flavour).items():
+        z.writestr(_info(name), data)
 
 
 def _build_description(model_identifier: str, c_files: list[str]) -> bytes:
@@ -231,14 +242,15 @@ def build_ssp(
     target = out_dir / f"{name}.ssp"
     tmp_target = target.with_suffix(".ssp.tmp")
     with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
-        z.write(source / "SystemStructure.ssd", "SystemStructure.ssd")
+        # writestr with fixed dates and modes (z.write would take the files' mtimes)
+        z.writestr(_info("SystemStructure.ssd"), (source / "SystemStructure.ssd").read_bytes())
         for ssv in sorted(source.glob("*.ssv")):
-            z.write(ssv, f"resources/{ssv.name}")
+            z.writestr(_info(f"resources/{ssv.name}"), ssv.read_bytes())
         for comp in COMPONENTS:
             fmu = Path(fmu_dir or out_dir) / comp.fmu
             if not fmu.is_file():
                 raise FileNotFoundError(f"{fmu} is missing: build the FMUs first")
-            z.write(fmu, comp.source)
+            z.writestr(_info(comp.source), fmu.read_bytes())
     try:
         read_ssd(str(tmp_target), validate=True)
     except Exception as exc:

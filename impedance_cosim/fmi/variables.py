@@ -14,6 +14,12 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from typing import Any
 
+from impedance_cosim import __version__
+
+# Who wrote the FMUs and under which terms (the root LICENSE; every FMU carries a copy).
+AUTHOR = "The impedance-cosim authors"
+COPYRIGHT = "Copyright (c) 2026, The impedance-cosim authors"
+LICENSE = "BSD-2-Clause (see documentation/licenses/license.txt)"
 # Base-unit exponents (kg, m, s, rad) of every unit the models use.
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -134,6 +140,10 @@ def model_description(
             "modelName": model_name,
             "guid": guid,
             "description": description,
+            "author": AUTHOR,
+            "version": __version__,
+            "copyright": COPYRIGHT,
+            "license": LICENSE,
             "generationTool": generation_tool,
             "variableNamingConvention": "flat",
             "numberOfEventIndicators": "0",

@@ -89,14 +89,11 @@ def replacement_problems(
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
-    from impedance_cosim.cli import CliError, parse_overrides
+    from impedance_cosim.cli import parse_overrides
 
     realtime, tick, max_step, duration, faults, key = _robot_options(args)
-    try:
-        server = RobotServer(key, args.host, args.port, realtime, parse_overrides(args.set or []),
-                             faults, tick=tick, max_step=max_step)  # fmt: skip
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
+    server = RobotServer(key, args.host, args.port, realtime, parse_overrides(args.set or []),
+                         faults, tick=tick, max_step=max_step)  # fmt: skip
     host, port = server.address
     print(f"{LISTENING} {host}:{port} ({server.mode})", flush=True)
     try:
@@ -109,9 +106,10 @@ def _cmd_robot(args: argparse.Namespace) -> int:
 
 
 def _robot_options(args: argparse.Namespace):
-    """The robot's options, each checked (one-line CliError naming the option otherwise); the
-    session token's key from --token-file (created if missing) or the environment."""
-    from impedance_cosim.cli import CliError
+    """The robot's options, each checked (ValueError naming the option otherwise: main prints it
+    as one line, exit 2; not CliError, which is another class when cli runs as __main__, as in
+    the child start_robot starts); the session token's key from --token-file (created if
+    missing) or the environment."""
 
     def number(name: str, text: str | None, low: float, high: float) -> float | None:
         if text is None:
@@ -119,7 +117,7 @@ def _robot_options(args: argparse.Namespace):
         try:
             return check_range(name, float(text), low, high)
         except ValueError:
-            raise CliError(
+            raise ValueError(
                 f"{name} must be a number from {low:g} to {high:g} (got {text!r})"
             ) from None
 
@@ -131,28 +129,30 @@ def _robot_options(args: argparse.Namespace):
     except ValueError:
         port = -1
     if not 0 <= port <= 65535:
-        raise CliError(f"--port must be an integer from 0 to 65535 (got {args.port!r})")
+        raise ValueError(f"--port must be an integer from 0 to 65535 (got {args.port!r})")
     args.port = port
-    try:
-        faults = [Fault.parse(f) for f in args.fault or []]
-        env = os.environ.get(protocol.TOKEN_ENV)
-        if args.token_file and env:
-            raise CliError(f"give the session token by --token-file or {protocol.TOKEN_ENV}, "
-                           "not both")  # fmt: skip
-        if env:
-            key = protocol.token_key(env, protocol.TOKEN_ENV)
-        elif not args.token_file:
-            raise CliError(f"no session token: give --token-file PATH (a new token is written "
-                           f"there if it does not exist) or set {protocol.TOKEN_ENV}")  # fmt: skip
-        elif Path(args.token_file).expanduser().exists():
-            key = protocol.read_token_file(args.token_file)
-        else:
-            key = protocol.write_token_file(args.token_file)
-            print(f"robot: new session token written to {args.token_file} (mode 600)",
-                  file=sys.stderr, flush=True)  # fmt: skip
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
-    return args.realtime, tick, max_step, duration, faults, key
+    faults = [Fault.parse(f) for f in args.fault or []]
+    return args.realtime, tick, max_step, duration, faults, _session_key(args.token_file)
+
+
+def _session_key(token_file: str | None) -> bytes:
+    """The session token's MAC key: from the environment, or from token_file (created with a new
+    token if it does not exist); ValueError otherwise."""
+    env = os.environ.get(protocol.TOKEN_ENV)
+    if token_file and env:
+        raise ValueError(
+            f"give the session token by --token-file or {protocol.TOKEN_ENV}, not both"
+        )
+    if env:
+        return protocol.token_key(env, protocol.TOKEN_ENV)
+    if not token_file:
+        raise ValueError(f"no session token: give --token-file PATH (a new token is written there "
+                         f"if it does not exist) or set {protocol.TOKEN_ENV}")  # fmt: skip
+    if Path(token_file).expanduser().exists():
+        return protocol.read_token_file(token_file)
+    key = protocol.write_token_file(token_file)
+    print(f"robot: new session token written to {token_file} (mode 600)", file=sys.stderr)
+    return key
 
 
 def _cmd_swap(args: argparse.Namespace) -> int:

@@ -45,7 +45,6 @@ it never steps the robot twice. See docs/hil.md for the checks on each side and 
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 import math
 import os
@@ -87,7 +86,7 @@ def now_ns() -> int:
 
 
 def _mac(key: bytes, data: bytes) -> bytes:
-    return hmac.new(key, data, hashlib.sha256).digest()[:MAC_SIZE]
+    return hmac.digest(key, data, "sha256")[:MAC_SIZE]
 
 
 def pack(

@@ -231,8 +231,7 @@ class RobotServer:
             self.log(f"fault injected: session forgotten at STEP {seq}")
             self._forget_session()
         if self.session is None or msg.session != self.session:
-            text = "no such session (the robot restarted, or another bridge opened a session)"
-            return self._refuse(msg, protocol.NO_SESSION, text)
+            return self._refuse(msg, protocol.NO_SESSION, "no such session")
         if client != self.peer:
             self._drop("from an address other than the session's", client)
             return b""

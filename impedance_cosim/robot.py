@@ -110,7 +110,7 @@ class RobotServer:
             raise ValueError(f"--set: the plant refuses these parameters: {exc}") from None
         self.realtime = realtime
         self.faults = {f.seq: f for f in faults or []}
-        self.log = log or (lambda text: print(f"robot: {text}", file=sys.stderr, flush=True))
+        self.log = log or _log_to_stderr
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.bind((host, port))
@@ -350,6 +350,14 @@ class RobotServer:
                 self.plant = None
                 return
             self.k += 1
+
+
+def _log_to_stderr(text: str) -> None:
+    """The robot's log line on stderr; a closed or full stderr must not stop the robot."""
+    try:
+        print(f"robot: {text}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 def _parameter_problem(kind: str, x: float) -> str:

@@ -13,6 +13,7 @@ that stands in for the hardware behind the bridge plant FMU (bridge_model/, docs
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import os
 import sys
 from collections.abc import Mapping
@@ -96,6 +97,10 @@ def _cmd_robot(args: argparse.Namespace) -> int:
                          faults, tick=tick, max_step=max_step)  # fmt: skip
     host, port = server.address
     print(f"{LISTENING} {host}:{port} ({server.mode})", flush=True)
+    if not ipaddress.ip_address(host).is_loopback:
+        print(f"robot: {host} is not a loopback address: every machine that can reach port {port}"
+              " can send datagrams here (the token keeps them out; the traffic is not encrypted:"
+              " docs/hil.md, Trust model)", file=sys.stderr, flush=True)  # fmt: skip
     try:
         server.serve(duration)
     except KeyboardInterrupt:

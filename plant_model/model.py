@@ -15,7 +15,7 @@ from typing import Any
 
 from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import Variable, parameters_of, vector
+from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
 from impedance_cosim.ode import IntegrationError, integrate
 from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
 
@@ -53,6 +53,13 @@ class PlantModel(FmuModel):
         " wrist force/torque out, plus truth signals for analysis"
     )
     OUTPUT_DEPENDENCIES = ""  # outputs depend on the state only: no direct feedthrough
+    # The native flavour also offers Model Exchange (native/src/fmi2_me.c): these continuous
+    # states, their der() variables, and one event indicator (the contact's switching function).
+    # The tolerance a host's solver should use (the plant's own integrator runs at rtol 1e-9).
+    DEFAULT_EXPERIMENT = {**FmuModel.DEFAULT_EXPERIMENT, "tolerance": 1e-9}
+    MODEL_EXCHANGE = ModelExchange(
+        states=("q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3"), event_indicators=1
+    )
 
     @classmethod
     def variables(cls) -> list[Variable]:

@@ -476,6 +476,30 @@ int model_me_event_indicators(const Data *d, double z[N_EVENT_INDICATORS], char 
     return 0;
 }
 
+/* The current mode's switching function an instant (LOOKAHEAD) later along the trajectory:
+ * decides the switch where the host's root finder stopped exactly on the root (g == 0), where
+ * model_step would have stopped just past it (g > 0). */
+#define LOOKAHEAD 1e-9 /* s */
+
+static int switching_function_ahead(const Data *d, double *g, char *msg)
+{
+    PlantCtx c;
+    double y[ODE_N], dy[ODE_N];
+    char err[ODE_MSG_MAX];
+    read_ctx(d, &c);
+    model_me_get_states(d, y);
+    if (plant_rhs(&c, y, dy, err)) {
+        return fail(msg, "plant derivatives failed: %s", err);
+    }
+    for (int k = 0; k < ODE_N; k++) {
+        y[k] += LOOKAHEAD * dy[k];
+    }
+    if (plant_event(&c, y, g, err)) {
+        return fail(msg, "contact event indicator failed: %s", err);
+    }
+    return 0;
+}
+
 int model_me_event_update(Data *d, int *changed, int *again, char *msg)
 {
     double g;
@@ -483,7 +507,10 @@ int model_me_event_update(Data *d, int *changed, int *again, char *msg)
     if (model_me_event_indicators(d, &g, msg)) {
         return 1;
     }
-    if (g > 0.0) { /* the switching function of the current mode crossed: switch, as model_step */
+    if (g == 0.0 && switching_function_ahead(d, &g, msg)) {
+        return 1;
+    }
+    if (g > 0.0) { /* the current mode's switching function crossed: switch, as model_step */
         d->m.in_contact = !d->m.in_contact;
         *changed = 1;
         if (model_me_event_indicators(d, &g, msg)) {

@@ -23,10 +23,12 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
     fmi2ModelExchange,
 )
+from fmpy.simulation import Input
 from fmpy.validation import validate_fmu
 
 from impedance_cosim.analysis import read_csv
 from impedance_cosim.master import Master
+from impedance_cosim.replay import cs_crossing_times, held_input, me_replay
 from impedance_cosim.ssp import read_ssp
 from plant_model.model import PlantModel
 
@@ -258,60 +260,22 @@ def paper_torques(native_dir):
     return t, tau, q_cs
 
 
-def _input_signal(t: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """fmpy input for a torque held over each [t_i, t_i+1]: each step is a pair of equal time
-    points (an input event). fmpy's CVode root function applies the inputs at t without
-    after_event, so a step placed exactly at t_i would hand the solver the previous torque
-    after each restart; the pair is placed at t_i (1 - 1e-10) instead, within fmpy's isclose
-    (rel_tol 1e-9), so the event is still handled at t_i and every evaluation at or after t_i
-    sees the new torque."""
-    times = np.repeat(t, 2)[1:-1]
-    times[1:] *= 1.0 - 1e-10
-    signal = np.zeros(len(times), dtype=[("time", float), ("tau1", float), ("tau2", float),
-                                         ("tau3", float)])  # fmt: skip
-    signal["time"] = times
-    for i in range(3):
-        signal[f"tau{i + 1}"] = np.repeat(tau[:, i], 2)
-    return signal
-
-
-def _cs_contact_times(native_dir, t, tau) -> list[float]:
-    """Where the CS plant's tool point crosses the wall, to 1e-12 s: step with the torques, and
-    bisect each step in which the side changes (restoring the FMU state; CS results do not
-    depend on the step size)."""
-    md = read_model_description(str(native_dir / PLANT))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    cs = FMU2Slave(
-        guid=md.guid,
-        unzipDirectory=extract(str(native_dir / PLANT)),
-        modelIdentifier="PumaPlant",
-        instanceName="cs",
-    )
-    cs.instantiate()
-    cs.setupExperiment(startTime=0.0)
-    cs.enterInitializationMode()
-    cs.exitInitializationMode()
-    taus, x = [vr["tau1"], vr["tau2"], vr["tau3"]], [vr["x"]]
-    times, inside = [], cs.getReal(x)[0] > WALL_X
-    for i in range(len(tau)):
-        cs.setReal(taus, list(tau[i]))
-        start = cs.getFMUstate()
-        cs.doStep(t[i], DT)
-        if (cs.getReal(x)[0] > WALL_X) != inside:
-            lo, hi = 0.0, DT
-            while hi - lo > 1e-12:
-                mid = 0.5 * (lo + hi)
-                cs.setFMUstate(start)
-                cs.doStep(t[i], mid)
-                lo, hi = (lo, mid) if (cs.getReal(x)[0] > WALL_X) != inside else (mid, hi)
-            times.append(t[i] + hi)
-            inside = not inside
-            cs.setFMUstate(start)
-            cs.doStep(t[i], DT)
-        cs.freeFMUstate(start)
-    cs.terminate()
-    cs.freeInstance()
-    return times
+def test_held_input_gives_the_new_torque_from_each_step_on(native_dir, paper_torques):
+    """fmpy's Input, as its CVode root function and its event handling call it, sees tau[i]
+    everywhere in [t_i, t_i+1) (the master's sample-and-hold), to the rounding of fmpy's linear
+    interpolation between equal values."""
+    t, tau, _ = paper_torques
+    signal = held_input(t[:41], tau[:40], ("tau1", "tau2", "tau3"))
+    table = np.stack([signal[n] for n in ("tau1", "tau2", "tau3")])
+    for i in range(40):
+        for time in (t[i], t[i] + 0.3 * DT, t[i + 1] - 1e-9):
+            for after_event in (False, True):
+                value, _ = Input.interpolate(time, signal["time"], table, False, after_event)
+                np.testing.assert_allclose(value, tau[i], rtol=1e-15)  # fmpy interpolates
+    # one input event per torque change, each at t_i as fmpy's isclose sees it
+    events = Input.findEvents(signal, read_model_description(str(native_dir / PLANT)))
+    assert len(events) == 40 and events[-1] == math.inf
+    assert all(math.isclose(e, ti) and e < ti for e, ti in zip(events[:-1], t[1:40]))
 
 
 def test_paper_scenario_torques_reproduce_co_simulation(native_dir, paper_torques):
@@ -321,32 +285,15 @@ def test_paper_scenario_torques_reproduce_co_simulation(native_dir, paper_torque
     The event indicator is zero (to 1e-9 m of penetration) exactly at the contact events and
     negative everywhere else."""
     t, tau, q_cs = paper_torques
-    me = MEPlant(native_dir)
-    log = []
-
-    def record(time, _recorder) -> bool:
-        log.append((time, me.indicator(), *me.states()))
-        return True
-
-    result = simulate_fmu(
-        str(native_dir / PLANT),
-        fmi_type="ModelExchange",
-        input=_input_signal(t, tau),
-        output_interval=DT,
-        relative_tolerance=1e-14,
-        record_events=False,
-        fmu_instance=me.fmu,
-        step_finished=record,
-    )
-    me.fmu.freeInstance()
+    result, log = me_replay(native_dir / PLANT, t, tau, relative_tolerance=1e-14)
     q_me = np.column_stack([result[f"q{i}_true"] for i in (1, 2, 3)])
     assert np.array_equal(result["time"], t)
     assert np.abs(q_me - q_cs).max() < 1e-5
 
-    log = np.array(log)
     on_grid = np.isclose(log[:, 0] / DT, np.round(log[:, 0] / DT), rtol=0.0, atol=1e-6)
     events = log[~on_grid]  # state events: where CVode stopped off the 2.5 ms grid
-    cs_times = _cs_contact_times(native_dir, t, tau)
+    cs_times, q_cs_replay = cs_crossing_times(native_dir / PLANT, t, tau, WALL_X)
+    assert np.abs(q_cs_replay - q_cs).max() < 1e-8  # the replayed CS plant is the master's
     assert len(cs_times) == 4  # two contacts: closing at ~3.85 s and ~13.85 s, opening after
     assert len(events) == len(cs_times)
     assert np.abs(events[:, 0] - cs_times).max() < 1e-3

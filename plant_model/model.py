@@ -28,8 +28,18 @@ class PlantSetup:
     y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
     phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
     elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
-    q_quant: float = _p(0.0, "rad", "Joint encoder resolution (0: no quantization)", 0.0)
-    q_noise: float = _p(0.0, "rad", "Std. dev. of Gaussian joint-angle noise (0: none)", 0.0)
+    q_quant: float = _p(
+        0.0,
+        "rad",
+        "Joint encoder resolution (0: none; Model Exchange: ideal encoders, 0 only)",
+        0.0,
+    )
+    q_noise: float = _p(
+        0.0,
+        "rad",
+        "Std. dev. of Gaussian joint-angle noise (0: none; Model Exchange: ideal encoders, 0 only)",
+        0.0,
+    )
     noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
     rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
     atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)

@@ -1,7 +1,8 @@
-"""FMI 2.0 Model Exchange of the native PumaPlant (native/src/fmi2_me.c): the modelDescription,
-agreement with the co-simulation interface (default experiment and the paper scenario's torques
-replayed open loop under fmpy's CVode), the contact event indicator, and the ME rules (ideal
-sensors, call order)."""
+"""FMI 2.0 Model Exchange of the native FMUs (native/src/fmi2_me.c). The plant: the
+modelDescription, agreement with the co-simulation interface (default experiment and the paper
+scenario's torques replayed open loop under fmpy's CVode), the contact event indicator, and the ME
+rules (ideal sensors, call order). The controller: time events at its sample instants, the same
+torques as under co-simulation."""
 
 from __future__ import annotations
 
@@ -21,7 +22,6 @@ from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
-    fmi2ModelExchange,
 )
 from fmpy.simulation import Input
 from fmpy.validation import validate_fmu
@@ -30,11 +30,12 @@ from impedance_cosim.analysis import read_csv
 from impedance_cosim.master import Master
 from impedance_cosim.replay import cs_crossing_times, held_input, me_replay
 from impedance_cosim.ssp import read_ssp
+from impedance_cosim.system import CONNECTIONS
 from plant_model.model import PlantModel
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
-PLANT = "PumaPlant.fmu"
+PLANT, CONTROLLER = "PumaPlant.fmu", "ImpedanceController.fmu"
 STATES = ("q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3")
 DT = 1 / 400
 WALL_X, WALL_K = 0.65, 1e4  # the plant's defaults (the paper scenario sets the same)
@@ -111,33 +112,11 @@ def test_native_plant_declares_model_exchange(native_dir, fmu_dir):
     assert all(set(u.dependencies) == state_vars for u in md.outputs)
     with zipfile.ZipFile(path) as z:
         assert "sources/fmi2_me.c" in z.namelist()
-    # the Python FMU (pythonfmu, co-simulation only) and the native controller do not claim ME
-    for other in (fmu_dir / PLANT, native_dir / "ImpedanceController.fmu"):
+    # the Python FMUs (pythonfmu: co-simulation only) do not claim ME
+    for other in (fmu_dir / name for name in (PLANT, CONTROLLER, "BridgePlant.fmu")):
         with zipfile.ZipFile(other) as z:
             root = ET.fromstring(z.read("modelDescription.xml"))
         assert root.find("ModelExchange") is None and root.get("numberOfEventIndicators") == "0"
-
-
-def test_controller_refuses_model_exchange(native_dir):
-    """The native controller is co-simulation only: it exports no ME functions, and its
-    fmi2Instantiate refuses fmi2ModelExchange with a message."""
-    path = native_dir / "ImpedanceController.fmu"
-    md = read_model_description(str(path))
-    messages = []
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(lambda *a: messages.append(a[-1].decode()))
-    fmu = FMU2Slave(
-        guid=md.guid,
-        unzipDirectory=extract(str(path)),
-        modelIdentifier=md.coSimulation.modelIdentifier,
-        instanceName="c",
-    )
-    assert not hasattr(fmu.dll, "fmi2GetDerivatives")
-    component = fmu.fmi2Instantiate(
-        b"c", fmi2ModelExchange, md.guid.encode(), b"", ctypes.byref(callbacks), 0, 0
-    )
-    assert component is None
-    assert messages == ["ImpedanceController supports co-simulation only"]
 
 
 # --- the equations ---------------------------------------------------------------------------
@@ -302,3 +281,60 @@ def test_paper_scenario_torques_reproduce_co_simulation(native_dir, paper_torque
         assert abs(pen) < 1e-9
         assert abs(row[1]) <= WALL_K * 1e-9
     assert (log[on_grid, 1] < 0.0).all()  # between events, the indicator is negative
+
+
+# --- the controller: time events at the sample instants --------------------------------------
+
+
+def test_controller_model_exchange_has_time_events_only(native_dir):
+    path = native_dir / CONTROLLER
+    assert validate_fmu(str(path)) == []
+    md = read_model_description(str(path))
+    assert md.modelExchange is not None and md.coSimulation is not None
+    assert md.numberOfEventIndicators == 0 and md.derivatives == []
+    fmu = FMU2Model(
+        guid=md.guid,
+        unzipDirectory=extract(str(path)),
+        modelIdentifier=md.modelExchange.modelIdentifier,
+        instanceName="c",
+    )
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    for k in range(1, 4):
+        needed, terminate, _, changed, defined, next_time = fmu.newDiscreteStates()
+        assert (needed, terminate, changed, defined) == (False, False, False, True)
+        assert next_time == k * DT  # the next sample instant
+        fmu.enterContinuousTimeMode()
+        fmu.setTime(next_time)
+        fmu.enterEventMode()
+    fmu.terminate()
+    fmu.freeInstance()
+
+
+def test_controller_model_exchange_reproduces_co_simulation(native_dir):
+    """The ME controller under fmpy, fed the plant outputs our master recorded (native paper
+    scenario, the same parameter set), takes the same samples: torques bit-identical."""
+    master = Master(read_ssp(native_dir.parent / "PaperScenario-native.ssp"))
+    run = master.run()
+    assert run.ok, run.error
+    t = run["time"]
+    pairs = [(f"plant.{src}", dst) for comp, src, _, dst in CONNECTIONS if comp == "plant"]
+    signal = np.zeros(len(t), dtype=[("time", float)] + [(dst, float) for _, dst in pairs])
+    signal["time"] = t
+    for src, dst in pairs:
+        signal[dst] = run[src]
+    result = simulate_fmu(
+        str(native_dir / CONTROLLER),
+        fmi_type="ModelExchange",
+        input=signal,
+        start_values=master.parameters["controller"],
+        output_interval=DT,
+        record_events=False,
+    )
+    assert np.array_equal(result["time"], t)
+    for i in (1, 2, 3):
+        # the sample taken at t_k is the torque applied over [t_k, t_k+1]: the master's row k + 1
+        assert np.array_equal(result[f"tau{i}"][:-1], run[f"controller.tau{i}"][1:])
+    assert np.abs(result["tau1"]).max() > 1.0  # the controller did work

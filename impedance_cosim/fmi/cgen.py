@@ -65,10 +65,13 @@ def c_config(
             "#define MODEL_EXCHANGE 1",
             f"#define N_STATES {len(model_exchange.states)}",
             f"#define N_EVENT_INDICATORS {model_exchange.event_indicators}",
-            f"/* states: {', '.join(model_exchange.states)} */",
-            f"static const int DERIVATIVE_VRS[N_STATES] = {{{ders}\n}};",
-            "",
         ]
+        if model_exchange.states:
+            lines += [
+                f"/* states: {', '.join(model_exchange.states)} */",
+                f"static const int DERIVATIVE_VRS[N_STATES] = {{{ders}\n}};",
+            ]
+        lines.append("")
     lines += ["#endif", ""]
     return "\n".join(lines)
 
@@ -83,7 +86,7 @@ def generate() -> dict[Path, str]:
             PlantModel.MODEL_NAME, PlantModel.variables(), PlantModel.MODEL_EXCHANGE
         ),
         REPO / "native" / "controller" / "config.h": c_config(
-            ControllerModel.MODEL_NAME, ControllerModel.variables()
+            ControllerModel.MODEL_NAME, ControllerModel.variables(), ControllerModel.MODEL_EXCHANGE
         ),
     }
 

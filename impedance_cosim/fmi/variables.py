@@ -71,7 +71,8 @@ class Variable:
 @dataclass(frozen=True)
 class ModelExchange:
     """What a model offers under FMI 2.0 Model Exchange: its continuous states (Real variables of
-    its table, in the order of the state vector) and how many event indicators it has."""
+    its table, in the order of the state vector; none for a sampled-data model with time events
+    only) and how many event indicators it has."""
 
     states: tuple[str, ...]
     event_indicators: int = 0
@@ -255,7 +256,7 @@ def model_description(
         if v.causality == "output":
             dep = {} if output_dependencies is None else {"dependencies": output_dependencies}
             ET.SubElement(outs, "Unknown", {"index": str(i + 1), **dep})
-    if model_exchange:
+    if model_exchange and model_exchange.states:
         ders = ET.SubElement(ms, "Derivatives")
         for v in variables:
             if v.derivative:  # depends on states and inputs: no dependencies list (all knowns)

@@ -428,7 +428,7 @@ int model_me_check(const Data *d, char *msg)
     return 0;
 }
 
-void model_me_get_states(const Data *d, double x[N_STATES])
+void model_me_get_states(const Data *d, double x[])
 {
     for (int i = 0; i < 3; i++) {
         x[i] = d->m.q[i];
@@ -436,7 +436,7 @@ void model_me_get_states(const Data *d, double x[N_STATES])
     }
 }
 
-void model_me_set_states(Data *d, const double x[N_STATES])
+void model_me_set_states(Data *d, const double x[])
 {
     for (int i = 0; i < 3; i++) {
         d->m.q[i] = x[i];
@@ -463,7 +463,7 @@ int model_me_evaluate(Data *d, char *msg)
     return 0;
 }
 
-int model_me_event_indicators(const Data *d, double z[N_EVENT_INDICATORS], char *msg)
+int model_me_event_indicators(const Data *d, double z[], char *msg)
 {
     PlantCtx c;
     double y[ODE_N];
@@ -500,10 +500,10 @@ static int switching_function_ahead(const Data *d, double *g, char *msg)
     return 0;
 }
 
-int model_me_event_update(Data *d, int *changed, int *again, char *msg)
+int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
 {
     double g;
-    *changed = *again = 0;
+    (void)t; /* no time events: the contact is a state event */
     if (model_me_event_indicators(d, &g, msg)) {
         return 1;
     }
@@ -512,11 +512,11 @@ int model_me_event_update(Data *d, int *changed, int *again, char *msg)
     }
     if (g > 0.0) { /* the current mode's switching function crossed: switch, as model_step */
         d->m.in_contact = !d->m.in_contact;
-        *changed = 1;
+        ev->changed = 1;
         if (model_me_event_indicators(d, &g, msg)) {
             return 1;
         }
-        *again = g > 0.0;
+        ev->again = g > 0.0;
     }
     return 0;
 }

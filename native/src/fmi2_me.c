@@ -5,9 +5,10 @@
  * <-> continuous-time mode -> terminated; a call out of order returns fmi2Error with a logged
  * message and changes nothing. The host owns time and the continuous states: fmi2SetTime,
  * fmi2SetContinuousStates and fmi2Set<Type> mark the outputs and derivatives stale, and the next
- * getter recomputes them once (model_me_evaluate). The model's discrete state (e.g. the plant's
- * contact mode) changes only in event mode, in fmi2NewDiscreteStates; continuous states never
- * jump, and no time events are announced.
+ * getter recomputes them once (model_me_evaluate). The model's discrete state (the plant's
+ * contact mode, the controller's samples) changes only in event mode, in fmi2NewDiscreteStates,
+ * which also announces the model's next time event (the controller's next sample instant);
+ * continuous states never jump.
  */
 #include <math.h>
 #include <stddef.h>
@@ -117,17 +118,17 @@ fmi2Status fmi2EnterEventMode(fmi2Component c)
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
     Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2NewDiscreteStates");
-    int changed = 0, again = 0;
+    MeEvent ev = {0, 0, 0, 0.0};
     if (!inst) {
         return fmi2Error;
     }
     if (!eventInfo) {
         return ERROR(inst, "fmi2NewDiscreteStates: eventInfo is NULL");
     }
-    if (model_me_event_update(&inst->s.d, &changed, &again, inst->msg)) {
+    if (model_me_event_update(&inst->s.d, now(inst), &ev, inst->msg)) {
         return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
     }
-    if (changed) {
+    if (ev.changed) {
         inst->s.dirty = 1;
         inst->s.event_switches += 1;
         if (inst->s.event_switches > MAX_EVENT_SWITCHES) {
@@ -135,12 +136,12 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
                          now(inst), MAX_EVENT_SWITCHES);
         }
     }
-    eventInfo->newDiscreteStatesNeeded = again ? fmi2True : fmi2False;
+    eventInfo->newDiscreteStatesNeeded = ev.again ? fmi2True : fmi2False;
     eventInfo->terminateSimulation = fmi2False;
     eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
     eventInfo->valuesOfContinuousStatesChanged = fmi2False; /* no state jumps */
-    eventInfo->nextEventTimeDefined = fmi2False;
-    eventInfo->nextEventTime = 0.0;
+    eventInfo->nextEventTimeDefined = ev.next_defined ? fmi2True : fmi2False;
+    eventInfo->nextEventTime = ev.next_defined ? ev.next : 0.0;
     return fmi2OK;
 }
 
@@ -260,9 +261,11 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
     if (status != fmi2OK) {
         return status;
     }
+#if N_STATES > 0
     for (size_t k = 0; k < nx; k++) {
         derivatives[k] = inst->s.d.r[DERIVATIVE_VRS[k]];
     }
+#endif
     return fmi2OK;
 }
 

@@ -5,7 +5,7 @@
  * S_STEP_COMPLETE; Model Exchange (section 3.2.3) alternates between S_EVENT_MODE and
  * S_CONTINUOUS_TIME. A model offers Model Exchange when its generated config.h defines
  * MODEL_EXCHANGE (with N_STATES, N_EVENT_INDICATORS and DERIVATIVE_VRS[]) and its model.c
- * implements the model_me_* functions declared below.
+ * implements the model_me_* functions of model_me.h.
  */
 #ifndef INSTANCE_H
 #define INSTANCE_H

@@ -153,6 +153,33 @@ def test_derivatives_are_the_plant_equations(native_dir):
     me.fmu.freeInstance()
 
 
+def test_fmu_state_under_model_exchange(native_dir):
+    """fmi2GetFMUstate/SetFMUstate restore the states, the contact mode and the mode phase."""
+    me = MEPlant(native_dir)
+    me.initialize()
+    me.fmu.enterContinuousTimeMode()
+    plant = PlantModel({}, 0.0)
+    q = plant.arm.inverse_kinematics((0.651, 0.1, 0.2), True)  # 1 mm into the wall
+    x = (ctypes.c_double * 6)(*q, -0.1, 0.2, 0.0)
+    me.fmu.setContinuousStates(x, 6)
+    saved = me.fmu.getFMUstate()
+    free = me.derivatives()  # still the free mode: the host has not seen the event yet
+    assert me.indicator() > 0.0
+    me.fmu.enterEventMode()
+    me.fmu.newDiscreteStates()  # contact: the wall force acts from here on
+    me.fmu.enterContinuousTimeMode()
+    in_contact = me.derivatives()
+    assert me.indicator() < 0.0 and not np.allclose(in_contact, free)
+    me.fmu.setContinuousStates((ctypes.c_double * 6)(*q, 0.0, 0.0, 0.0), 6)
+    me.fmu.setFMUstate(saved)
+    assert me.states().tolist() == list(x)
+    assert me.derivatives().tolist() == free.tolist()
+    me.fmu.setContinuousStates(x, 6)  # allowed: the restored phase is continuous-time mode
+    me.fmu.freeFMUstate(saved)
+    me.fmu.terminate()
+    me.fmu.freeInstance()
+
+
 def test_sensor_effects_are_refused_under_model_exchange(native_dir):
     for name in ("q_noise", "q_quant"):
         me = MEPlant(native_dir)

@@ -136,7 +136,8 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
 NATIVE = REPO / "native"
 NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
-                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h")  # fmt: skip
+                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h",
+                 "fmi2_me.c", "instance.h", "model_me.h")  # fmt: skip
 NATIVE_MODEL = ("config.h", "model.h", "model.c")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
@@ -170,7 +171,8 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
     c_files = sorted(n for n in sources if n.endswith(".c"))
 
     def xml(guid: str) -> bytes:
-        return _model_description(cls, guid, "native C99", source_files=c_files)
+        me = getattr(cls, "MODEL_EXCHANGE", None)  # Model Exchange: native flavour only
+        return _model_description(cls, guid, "native C99", source_files=c_files, model_exchange=me)
 
     digest = hashlib.sha256(xml(""))
     for name in sorted(sources):
@@ -260,7 +262,9 @@ def build_ssp(
     return target
 
 
-def _model_description(cls, guid: str, flavour: str, source_files=None) -> bytes:
+def _model_description(
+    cls, guid: str, flavour: str, source_files=None, model_exchange=None
+) -> bytes:
     """modelDescription.xml of a model class, the same for both flavours but the tool name and
     the source file list."""
     return model_description(
@@ -272,6 +276,7 @@ def _model_description(cls, guid: str, flavour: str, source_files=None) -> bytes
         generation_tool=f"impedance_cosim {impedance_cosim.__version__} ({flavour})",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         source_files=source_files,
+        model_exchange=model_exchange,
     )
 
 

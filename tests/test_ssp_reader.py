@@ -7,10 +7,12 @@ from __future__ import annotations
 import os
 import random
 import re
+import signal
 import struct
 import subprocess
 import sys
 import tempfile
+import time
 import traceback
 import warnings
 import zipfile
@@ -314,7 +316,8 @@ def test_malformed_parameter_set_names_the_file(archive, tmp_path):
 
 
 def test_cli_run_leaves_no_extraction_folder(archive, tmp_path):
-    """A CLI run, a successful one and one refused at load, leaves no folder of the reader's."""
+    """A CLI run leaves no folder of the reader's: a successful one, one refused at load and
+    one interrupted by Ctrl-C."""
     tmp = tmp_path / "cli_tmp"
     tmp.mkdir()
     env = dict(os.environ, TMPDIR=str(tmp))
@@ -328,6 +331,22 @@ def test_cli_run_leaves_no_extraction_folder(archive, tmp_path):
         assert done.returncode == code, done.stderr
         assert leftovers(tmp) == []
     assert "stepSize: 'x' is not a number" in done.stderr
+    cmd[cmd.index(str(bad))] = str(archive)
+    cmd[cmd.index("0.05")] = "400"
+    run = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not leftovers(tmp) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert leftovers(tmp), "the run never extracted the archive"
+        time.sleep(0.5)
+        run.send_signal(signal.SIGINT)  # Ctrl-C in the middle of the run
+        run.wait(timeout=60)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert leftovers(tmp) == []
 
 
 # --- fuzz ----------------------------------------------------------------------------------------

@@ -198,6 +198,42 @@ def test_unsafe_member_names_are_refused(archive, tmp_path, name, message):
     refused(repack(archive, tmp_path / "bad.ssp", add=[(name, b"x")]), message)
 
 
+def test_fmu_inside_is_checked_like_the_archive(archive, tmp_path):
+    """fmpy extracts each FMU later: its members get the same name, link and size checks."""
+
+    def with_member(name: str, data: bytes, attr: int = 0):
+        def edit(fmu: bytes) -> bytes:
+            out = tmp_path / "inner.fmu"
+            out.write_bytes(fmu)
+            with zipfile.ZipFile(out, "a") as z:
+                info = zipfile.ZipInfo(name)
+                info.external_attr = attr << 16
+                z.writestr(info, data, compress_type=zipfile.ZIP_DEFLATED)
+            return out.read_bytes()
+
+        return edit
+
+    for name, attr, message in [
+        ("../../evil.so", 0, r"resources/PumaPlant.fmu: member '../../evil.so' has a '\.\.'"),
+        ("binaries/link.so", 0o120777, "resources/PumaPlant.fmu: member .* symbolic link"),
+    ]:
+        bad = repack(archive, tmp_path / "inner.ssp", {PLANT: with_member(name, b"x", attr)})
+        refused(bad, message)
+    bomb = repack(archive, tmp_path / "bomb.ssp", {PLANT: with_member("big.bin", bytes(3 << 20))})
+    refused(bomb, "PumaPlant.fmu: member 'big.bin' unpacks to", limits=Limits(member_bytes=2 << 20))
+
+
+def test_extract_to_must_be_empty(archive, tmp_path):
+    folder = tmp_path / "given"
+    folder.mkdir()
+    (folder / "something").write_text("mine")
+    refused(archive, "the folder is not empty", extract_to=folder)
+    assert (folder / "something").read_text() == "mine"
+    with read_ssp(archive, extract_to=tmp_path / "new") as desc:
+        assert desc.component("plant").fmu == tmp_path / "new" / PLANT
+    assert (tmp_path / "new" / PLANT).is_file()  # a given folder belongs to the caller
+
+
 def test_duplicate_member_is_refused(archive, tmp_path):
     bad = repack(archive, tmp_path / "dup.ssp", add=[(PLANT, b"a second plant")])
     refused(bad, "member 'resources/PumaPlant.fmu' appears twice")

@@ -102,15 +102,20 @@ def read_ssp(
     """Check, extract (to a new temporary folder, or the empty folder `extract_to`) and read an
     .ssp archive. Close the result (or use it as a context manager) to remove the folder."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise SspError(f"{path} does not exist (run `impedance-cosim build`)")
-    if extract_to is None:
-        folder = Path(tempfile.mkdtemp(prefix="impcosim_ssp_"))
-    else:
-        folder = Path(extract_to)
-        folder.mkdir(parents=True, exist_ok=True)
-        if any(folder.iterdir()):
-            raise SspError(f"cannot extract {path.name} into {folder}: the folder is not empty")
+    if not path.is_file():
+        raise SspError(f"{path} is not a file")
+    try:
+        if extract_to is None:
+            folder = Path(tempfile.mkdtemp(prefix="impcosim_ssp_"))
+        else:
+            folder = Path(extract_to)
+            folder.mkdir(parents=True, exist_ok=True)
+            if any(folder.iterdir()):
+                raise SspError(f"cannot extract {path.name} into {folder}: the folder is not empty")
+    except OSError as exc:
+        raise SspError(f"cannot make a folder to extract {path.name} into: {exc}") from None
     try:
         desc = _read(path, folder, limits)
     except BaseException:

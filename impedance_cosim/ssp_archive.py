@@ -35,6 +35,7 @@ class Limits:
 
 DEFAULT_LIMITS = Limits()
 _CHUNK = 1 << 20
+_RESERVED = {"CON", "PRN", "AUX", "NUL"} | {f"{d}{i}" for d in ("COM", "LPT") for i in range(1, 10)}
 _STORED_OR_DEFLATED = (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED)  # SSP 1.0, section 3
 
 
@@ -57,6 +58,8 @@ def _name_problem(name: str) -> str | None:
             return f"a {part!r} path component" if part else "an empty path component"
         if len(part.encode("utf-8", "surrogatepass")) > 255:
             return "a path component longer than 255 bytes"
+        if part.split(".")[0].upper() in _RESERVED or part[-1] in ". ":
+            return f"the name {part!r}, which Windows cannot store"
     return None
 
 
@@ -147,37 +150,44 @@ def extract(
     root = folder.resolve()
     total = 0
     for info in files:
-        parts = info.filename.split("/")
-        parent = root
-        for part in parts[:-1]:
-            parent = parent / part
-            try:
-                os.mkdir(parent, 0o700)
-            except FileExistsError:
-                pass
-            if not stat.S_ISDIR(os.lstat(parent).st_mode):  # never walk through a link
-                raise SspError(
-                    f"{where}: cannot extract {info.filename!r}: {parent} is not a folder"
-                )
-        target = parent / parts[-1]
-        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
         try:
-            fd = os.open(target, flags, 0o600)
-        except OSError as exc:
-            raise SspError(f"{where}: cannot extract {info.filename!r}: {exc.strerror}") from None
-        size = 0
-        with os.fdopen(fd, "wb") as out:
-            for chunk in _chunks(archive, info, where):
-                size += len(chunk)
-                total += len(chunk)
-                if size > min(info.file_size, limits.member_bytes):
-                    raise SspError(
-                        f"{where}: member {info.filename!r} unpacks to more than its header says"
-                        f" ({info.file_size} bytes)"
-                    )
-                if total > limits.total_bytes:
-                    raise SspError(f"{where} unpacks to more than {limits.total_bytes} bytes")
-                out.write(chunk)
+            total += _write(archive, info, root, where, limits, total)
+        except OSError as exc:  # disk full, permissions, a name the file system refuses
+            raise SspError(
+                f"{where}: cannot extract {info.filename!r}: {exc.strerror or exc}"
+            ) from None
+
+
+def _write(
+    archive: zipfile.ZipFile, info: zipfile.ZipInfo, root: Path, where: str, limits: Limits,
+    total: int,
+) -> int:  # fmt: skip
+    """Write one member below root; returns its size."""
+    parts = info.filename.split("/")
+    parent = root
+    for part in parts[:-1]:
+        parent = parent / part
+        try:
+            os.mkdir(parent, 0o700)
+        except FileExistsError:
+            pass
+        if not stat.S_ISDIR(os.lstat(parent).st_mode):  # never walk through a link
+            raise SspError(f"{where}: cannot extract {info.filename!r}: {part} is not a folder")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+    flags |= getattr(os, "O_BINARY", 0)
+    size = 0
+    with os.fdopen(os.open(parent / parts[-1], flags, 0o600), "wb") as out:
+        for chunk in _chunks(archive, info, where):
+            size += len(chunk)
+            if size > min(info.file_size, limits.member_bytes):
+                raise SspError(
+                    f"{where}: member {info.filename!r} unpacks to more than its header says"
+                    f" ({info.file_size} bytes)"
+                )
+            if total + size > limits.total_bytes:
+                raise SspError(f"{where} unpacks to more than {limits.total_bytes} bytes")
+            out.write(chunk)
+    return size
 
 
 def resolve_source(uri: str | None, names: set[str], what: str) -> str:

@@ -191,6 +191,8 @@ def test_symlink_member_is_refused(archive, tmp_path, private_tmp):
         ("./SystemStructure.ssd", r"'\.' path component"),
         ("resources//evil.txt", "empty path component"),
         ("RESOURCES/PumaPlant.fmu", "appears twice"),
+        ("resources/aux.txt", "Windows cannot store"),
+        ("resources/trailing. ", "Windows cannot store"),
         ("resources/PumaPlant.fmu/inner", "both a file and a folder"),
     ],
 )
@@ -286,6 +288,12 @@ def test_bad_crc_names_the_member(archive, tmp_path):
     raw[at + 6] ^= 0x01
     (tmp_path / "crc.ssp").write_bytes(bytes(raw))
     refused(tmp_path / "crc.ssp", r"member 'resources/\w+\.ssv' is corrupt \(bad CRC\)")
+
+
+def test_no_place_to_extract_is_one_error(archive, tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "missing" / "tmp"))
+    refused(archive, "cannot make a folder to extract PaperScenario-native.ssp into")
+    refused(tmp_path, "is not a file")
 
 
 def test_not_a_zip_and_truncated_zip(archive, tmp_path):

@@ -149,13 +149,14 @@ def _read(path: Path, folder: Path, limits: Limits) -> SystemDescription:
             if system.find(f"ssd:Elements/ssd:{tag}", NS) is not None:
                 raise SspError(f"{where}: system {sysname!r}: {tag} elements are not supported")
         ctx = f"{where}: system {sysname!r}"
-        src = _Source(archive, infos, where, limits)
+        src = _Source(archive, infos, where, limits, xml_left=4 * limits.xml_bytes)
         sets = _bindings(system, "", ctx, src)
-        components = []
+        components: list[Component] = []
+        seen: set[str] = set()
         for i, c in enumerate(system.findall("ssd:Elements/ssd:Component", NS), 1):
             name = _required(c, "name", f"{where}: component #{i}")
             what = f"{where}: component {name!r}"
-            if any(x.name == name for x in components):
+            if name in seen:
                 raise SspError(f"{what} is declared twice")
             if c.get("type", FMU_TYPE) != FMU_TYPE:
                 raise SspError(f"{what}: type {c.get('type')} is not an FMU")
@@ -163,6 +164,7 @@ def _read(path: Path, folder: Path, limits: Limits) -> SystemDescription:
             _check_fmu(folder / source, f"{where}: {source}", limits)
             comp = Component(name, source, _connectors(c, what), fmu=folder / source)
             components.append(comp)
+            seen.add(name)
             sets += _bindings(c, name + ".", what, src)
     desc = SystemDescription(
         name=sysname,
@@ -307,6 +309,7 @@ class _Source:
     infos: dict[str, zipfile.ZipInfo]
     where: str
     limits: Limits
+    xml_left: int = 0  # bytes of parameter-set XML still allowed (bounds the work per archive)
 
 
 def _bindings(
@@ -324,8 +327,12 @@ def _bindings(
             raise SspError(f"{what}: parameter mappings are not supported")
         source = b.get("source")
         if source is not None:
-            name = resolve_source(source, set(src.infos), f"{what}: parameter binding")
+            name = resolve_source(source, src.infos, f"{what}: parameter binding")
             info = src.infos[name]
+            src.xml_left -= info.file_size
+            if src.xml_left < 0:
+                raise SspError(f"{what}: the parameter sets bound add up to more than"
+                               f" {4 * src.limits.xml_bytes} bytes")  # fmt: skip
             root = _xml(
                 src.archive, info, src.where, "SystemStructureParameterValues.xsd", src.limits
             )

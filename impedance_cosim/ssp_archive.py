@@ -15,6 +15,7 @@ import unicodedata
 import urllib.parse
 import zipfile
 import zlib
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -190,7 +191,7 @@ def _write(
     return size
 
 
-def resolve_source(uri: str | None, names: set[str], what: str) -> str:
+def resolve_source(uri: str | None, names: Collection[str], what: str) -> str:
     """The archive member a `source` URI names (SSP 1.0: a relative URI, resolved against the
     SSD at the archive root). Absolute or remote URIs, `..`, and anything else that would leave
     the archive are refused; the standard does not require hosts to support them."""

@@ -250,6 +250,15 @@ def test_member_count_and_sizes_are_capped(archive, tmp_path):
     refused(archive, "SystemStructure.ssd' is 16", limits=Limits(xml_bytes=1000))
 
 
+def test_parameter_set_reading_is_bounded(archive, tmp_path):
+    """One .ssv bound many times cannot make the reader parse without end."""
+    many = b'<ssd:ParameterBinding source="resources/observer.ssv" />' * 30
+    edit = ssd_edit(b"<ssd:ParameterBindings>", b"<ssd:ParameterBindings>" + many)
+    bad = repack(archive, tmp_path / "many.ssp", {SSD: edit})
+    refused(bad, "parameter sets bound add up to more than 80000 bytes",
+            limits=Limits(xml_bytes=20000))  # fmt: skip
+
+
 def _set_sizes(data: bytes, name: bytes, size: int) -> bytes:
     """Rewrite a member's uncompressed size in its local header and central directory entry."""
     out = bytearray(data)

@@ -287,16 +287,24 @@ def test_lying_header_cannot_fill_the_disk(archive, tmp_path):
     assert written < 1 << 20
 
 
-def test_bad_crc_names_the_member(archive, tmp_path):
-    with zipfile.ZipFile(tmp_path / "stored.ssp", "w", zipfile.ZIP_STORED) as z:
+def bad_crc(archive: Path, out: Path) -> Path:
+    """The archive stored (not deflated) with one bit of a parameter set flipped."""
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as z:
         for info, data in members(archive):
             z.writestr(info.filename, data)
-    raw = bytearray((tmp_path / "stored.ssp").read_bytes())
-    at = raw.find(b'name="plant.wall_k"')  # inside the first .ssv (stored, not deflated)
+    raw = bytearray(out.read_bytes())
+    at = raw.find(b'name="plant.wall_k"')  # inside the first .ssv
     assert at > 0
     raw[at + 6] ^= 0x01
-    (tmp_path / "crc.ssp").write_bytes(bytes(raw))
-    refused(tmp_path / "crc.ssp", r"member 'resources/\w+\.ssv' is corrupt \(bad CRC\)")
+    out.write_bytes(bytes(raw))
+    return out
+
+
+def test_bad_crc_names_the_member(archive, tmp_path):
+    refused(
+        bad_crc(archive, tmp_path / "crc.ssp"),
+        r"member 'resources/\w+\.ssv' is corrupt \(bad CRC\)",
+    )
 
 
 def test_no_place_to_extract_is_one_error(archive, tmp_path, monkeypatch):
@@ -366,6 +374,43 @@ def test_malformed_parameter_set_names_the_file(archive, tmp_path):
     edit = ssd_edit(b'<ssv:Real value="0.65"', b'<ssv:Real value="lots"')
     bad = repack(archive, tmp_path / "bad.ssv.ssp", {"resources/observer.ssv": edit})
     refused(bad, "malformed parameter set in .*resources/observer.ssv")
+
+
+def test_cli_gives_one_line_for_each_bad_archive(archive, tmp_path):
+    """End to end: the CLI on hostile archives prints one line naming the problem, no traceback,
+    and exits non-zero."""
+    link = zipfile.ZipInfo("resources/link.fmu")
+    link.external_attr = 0o120777 << 16
+    plant = b'source="resources/PumaPlant.fmu"'
+    cases = {
+        "absolute member": (repack(archive, tmp_path / "a.ssp", add=[("/tmp/x.fmu", b"x")]),
+                            "member '/tmp/x.fmu' has an absolute name"),
+        "absolute source": (repack(archive, tmp_path / "b.ssp",
+                                   {SSD: ssd_edit(plant, b'source="/etc/hostname"')}),
+                            "source '/etc/hostname' has an absolute path"),
+        "escaping source": (repack(archive, tmp_path / "c.ssp",
+                                   {SSD: ssd_edit(plant, b'source="../PumaPlant.fmu"')}),
+                            "source '../PumaPlant.fmu' has a '..' path component"),
+        "symlink": (repack(archive, tmp_path / "d.ssp", add=[(link, b"/etc/passwd")]),
+                    "member 'resources/link.fmu' is a symbolic link"),
+        "bad CRC": (bad_crc(archive, tmp_path / "e.ssp"), "is corrupt (bad CRC)"),
+        "missing ssv": (repack(archive, tmp_path / "f.ssp", drop=("resources/measured.ssv",)),
+                        "resources/measured.ssv is missing from the archive"),
+        "duplicate component": (
+            repack(archive, tmp_path / "g.ssp", {SSD: ssd_edit(
+                b'<ssd:Component name="plant"', b'<ssd:Component name="controller"')}),
+            "component 'controller' is declared twice"),
+        "not a zip": (tmp_path / "h.ssp", "is not an SSP archive"),
+    }  # fmt: skip
+    (tmp_path / "h.ssp").write_bytes(b"PK\x03\x04" + bytes(100))
+    for case, (path, message) in cases.items():
+        cmd = [sys.executable, "-m", "impedance_cosim.cli", "run", "--ssp", str(path), "--stop",
+               "0.05", "--no-figures", "--out", str(tmp_path / "out")]  # fmt: skip
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode != 0, case
+        assert len(lines) == 1 and message in lines[0], (case, done.stderr)
+        assert "Traceback" not in done.stderr + done.stdout, case
 
 
 def test_cli_run_leaves_no_extraction_folder(archive, tmp_path):

@@ -25,7 +25,9 @@ from impedance_cosim.ssp_archive import (
     Limits,
     SspError,
     check_members,
+    declared_members,
     extract,
+    open_zip,
     read_member,
     resolve_source,
 )
@@ -129,11 +131,7 @@ def read_ssp(
 
 def _read(path: Path, folder: Path, limits: Limits) -> SystemDescription:
     where = path.name
-    try:
-        archive = zipfile.ZipFile(path)
-    except Exception as exc:  # zipfile raises several types for a damaged central directory
-        raise SspError(f"{path} is not an SSP archive (not a readable zip file: {exc})") from None
-    with archive:
+    with open_zip(path, where, limits) as archive:
         files = check_members(archive, where, limits)
         names = {f.filename for f in files}
         if SSD not in names:
@@ -231,6 +229,9 @@ def _check_fmu(fmu: Path, where: str, limits: Limits) -> None:
     is left to the FMU loader, which says what is wrong with it."""
     if not zipfile.is_zipfile(fmu):
         return
+    count = declared_members(fmu)
+    if count is not None and count > limits.members:
+        raise SspError(f"{where} has {count} members (limit {limits.members})")
     try:
         archive = zipfile.ZipFile(fmu)
     except Exception:  # a damaged FMU is reported by the FMU loader

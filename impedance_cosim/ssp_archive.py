@@ -69,6 +69,32 @@ def _key(name: str) -> str:
     return unicodedata.normalize("NFC", name.rstrip("/")).casefold()
 
 
+def declared_members(path: Path) -> int | None:
+    """The member count the end-of-central-directory record declares (zip64 included), read
+    before zipfile loads the whole directory into memory; None if it cannot be read."""
+    end_record = getattr(zipfile, "_EndRecData", None)  # private, guarded: only a pre-check
+    try:
+        with open(path, "rb") as f:
+            record = end_record(f) if end_record else None
+        return int(record[zipfile._ECD_ENTRIES_TOTAL]) if record else None
+    except (OSError, ValueError, TypeError, IndexError, AttributeError, zipfile.BadZipFile):
+        return None
+
+
+def open_zip(
+    path: Path, where: str, limits: Limits, kind: str = "an SSP archive"
+) -> zipfile.ZipFile:
+    """Open a zip archive after checking its declared member count (a huge central directory
+    would otherwise fill memory before any check)."""
+    count = declared_members(path)
+    if count is not None and count > limits.members:
+        raise SspError(f"{where} has {count} members (limit {limits.members})")
+    try:
+        return zipfile.ZipFile(path)
+    except Exception as exc:  # zipfile raises several types for a damaged central directory
+        raise SspError(f"{where} is not {kind} (not a readable zip file: {exc})") from None
+
+
 def check_members(archive: zipfile.ZipFile, where: str, limits: Limits = DEFAULT_LIMITS) -> list:
     """Every member's name, type, method and declared size is safe; returns the file members."""
     infos = archive.infolist()

@@ -259,6 +259,14 @@ def test_parameter_set_reading_is_bounded(archive, tmp_path):
             limits=Limits(xml_bytes=20000))  # fmt: skip
 
 
+def test_member_count_is_checked_before_the_directory_is_loaded(archive, tmp_path):
+    raw = bytearray(archive.read_bytes())
+    end = raw.rfind(b"PK\x05\x06")  # end of central directory: entry counts at +8 and +10
+    raw[end + 8 : end + 12] = struct.pack("<HH", 60000, 60000)
+    (tmp_path / "many.ssp").write_bytes(bytes(raw))
+    refused(tmp_path / "many.ssp", r"many.ssp has 60000 members \(limit 2000\)")
+
+
 def _set_sizes(data: bytes, name: bytes, size: int) -> bytes:
     """Rewrite a member's uncompressed size in its local header and central directory entry."""
     out = bytearray(data)

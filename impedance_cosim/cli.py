@@ -61,7 +61,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     overrides = parse_overrides(args.set or [])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    system = read_ssp(ssp)
+    system = args.system = read_ssp(ssp)  # closed by main()
     progress = sys.stderr.isatty() and not args.no_progress
 
     def run(scenario: str | None):
@@ -176,6 +176,9 @@ def main(argv: list[str] | None = None) -> int:
     except (CliError, MasterError, SspError, ValueError, FileNotFoundError) as exc:
         print(f"impedance-cosim {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    finally:  # remove what read_ssp extracted, on every exit path
+        if getattr(args, "system", None) is not None:
+            args.system.close()
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import impedance_cosim
+from impedance_cosim.atomic import temp_path
 from impedance_cosim.fmi.variables import model_description
 
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
@@ -119,7 +120,7 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
         digest.update(xml(""))
         guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
-        tmp_target = target.with_suffix(".fmu.tmp")
+        tmp_target = temp_path(target)
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as zout:
             for name in ["modelDescription.xml", *members]:
                 info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
@@ -206,7 +207,7 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
         if done.returncode != 0:
             raise RuntimeError(f"compiling {cls.MODEL_NAME} failed:\n{done.stderr}")
         target = out_dir / f"{cls.MODEL_NAME}.fmu"
-        tmp_target = target.with_suffix(".fmu.tmp")
+        tmp_target = temp_path(target)
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr(_info("modelDescription.xml"), xml(guid))
             z.writestr(_info(f"binaries/linux64/{cls.MODEL_NAME}.so", 0o755), lib.read_bytes())
@@ -246,7 +247,7 @@ def build_ssp(
     out_dir = Path(out_dir)
     source = REPO / "ssp"
     target = out_dir / f"{name}.ssp"
-    tmp_target = target.with_suffix(".ssp.tmp")
+    tmp_target = temp_path(target)
     with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
         z.write(source / "SystemStructure.ssd", "SystemStructure.ssd")
         for ssv in sorted(source.glob("*.ssv")):

@@ -4,13 +4,18 @@ status checked, every log message kept, state save/restore. The building block o
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import ctypes
+import shutil
+import tempfile
+import threading
+import zipfile
 from collections.abc import Iterable, Mapping
-from functools import cache
 from pathlib import Path
 from typing import Any
 
-from fmpy import calloc, extract, free, read_model_description
+from fmpy import calloc, extract, free, platform, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
@@ -21,16 +26,85 @@ from fmpy.fmi2 import (
 )
 
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+INT32 = (-(2**31), 2**31 - 1)  # range of fmi2Integer
+EXTRACT_PREFIX = "impcosim_fmu_"  # extraction folders in the temporary directory
 
 
 class FmuError(RuntimeError):
     """An FMI call failed; the message carries the FMU's own log messages."""
 
 
-@cache
-def _unpacked(fmu: Path, mtime: float) -> tuple[Any, str]:
-    """Model description and extraction folder of an FMU (once per file version)."""
-    return read_model_description(str(fmu)), extract(str(fmu))
+def check_fmu(fmu: Path, description: Any) -> None:
+    """FmuError naming the problem unless the archive is intact (every member's CRC) and has a
+    binary for this platform."""
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            bad = z.testzip()
+            names = set(z.namelist())
+    except (zipfile.BadZipFile, OSError, EOFError, RuntimeError) as exc:
+        raise FmuError(f"{fmu.name} is not a readable FMU archive ({exc})") from None
+    if bad is not None:
+        raise FmuError(f"{fmu.name}: archive member {bad} is corrupt (CRC check failed)")
+    if description.coSimulation is None:
+        raise FmuError(f"{fmu.name} is not a co-simulation FMU")
+    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}"
+    if binary + sharedLibraryExtension not in names:
+        have = sorted(
+            {n.split("/")[1] for n in names if n.count("/") >= 2 and n[:9] == "binaries/"}
+        )
+        raise FmuError(
+            f"{fmu.name} has no binary for this platform ({binary}{sharedLibraryExtension}; "
+            f"binaries for: {', '.join(have) or 'none'})"
+        )
+
+
+class _Extractions:
+    """fmpy extraction folders shared by the instances of one FMU file, removed when the last
+    instance is freed (and at exit, for any still there)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._entries: dict[tuple[Path, float], list] = {}  # key -> [description, folder, users]
+
+    def acquire(self, fmu: Path) -> tuple[tuple[Path, float], Any, str]:
+        key = (fmu, fmu.stat().st_mtime)
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is None:
+                try:
+                    description = read_model_description(str(fmu))
+                except Exception as exc:  # fmpy raises bare Exceptions
+                    raise FmuError(f"{fmu.name}: invalid modelDescription.xml ({exc})") from None
+                check_fmu(fmu, description)
+                folder = tempfile.mkdtemp(prefix=EXTRACT_PREFIX)
+                try:
+                    extract(str(fmu), folder)
+                except Exception as exc:
+                    shutil.rmtree(folder, ignore_errors=True)
+                    raise FmuError(f"{fmu.name} cannot be extracted ({exc})") from None
+                entry = self._entries[key] = [description, folder, 0]
+            entry[2] += 1
+            return key, entry[0], entry[1]
+
+    def release(self, key: tuple[Path, float]) -> None:
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is None:
+                return
+            entry[2] -= 1
+            if entry[2] <= 0:
+                del self._entries[key]
+                shutil.rmtree(entry[1], ignore_errors=True)
+
+    def clear(self) -> None:
+        with self._lock:
+            for _, folder, _ in self._entries.values():
+                shutil.rmtree(folder, ignore_errors=True)
+            self._entries.clear()
+
+
+_extractions = _Extractions()
+atexit.register(_extractions.clear)
 
 
 class FmuInstance:
@@ -42,24 +116,41 @@ class FmuInstance:
             raise FileNotFoundError(f"FMU {path} does not exist (run `impedance-cosim build`)")
         self.path = path
         self.name = instance_name
-        self.description, unzip_dir = _unpacked(path, path.stat().st_mtime)
-        if self.description.coSimulation is None:
-            raise FmuError(f"{path.name} is not a co-simulation FMU")
+        self._alive = False
+        self._extraction, self.description, unzip_dir = _extractions.acquire(path)
+        try:
+            self._load(unzip_dir, logging_on)
+        except BaseException:
+            self._release()
+            raise
+
+    def _load(self, unzip_dir: str, logging_on: bool) -> None:
         self.variables = {v.name: v for v in self.description.modelVariables}
         self.messages: list[tuple[str, str, str]] = []  # (status, category, message)
         self._callbacks = fmi2CallbackFunctions()
         self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self.slave = FMU2Slave(
-            guid=self.description.guid,
-            unzipDirectory=unzip_dir,
-            modelIdentifier=self.description.coSimulation.modelIdentifier,
-            instanceName=instance_name,
-        )
-        self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
-        self._alive = True
+        try:
+            self.slave = FMU2Slave(
+                guid=self.description.guid,
+                unzipDirectory=unzip_dir,
+                modelIdentifier=self.description.coSimulation.modelIdentifier,
+                instanceName=self.name,
+            )
+        except Exception as exc:  # fmpy raises bare Exceptions when the library does not load
+            text = str(exc).replace(unzip_dir + "/", "")
+            raise FmuError(
+                f"{self.name}: cannot load the binary of {self.path.name}: {text}"
+            ) from None
         self.fatal = False  # an fmi2Fatal status was returned: no further call is allowed
+        try:
+            self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
+        except FmuError:
+            with contextlib.suppress(Exception):
+                self.slave.freeLibrary()
+            raise
+        self._alive = True
         self._do_step = self.slave._functions["fmi2DoStep"]  # raw ctypes: we check the status
 
     # --- logging and status ---------------------------------------------------------------------
@@ -71,7 +162,7 @@ class FmuInstance:
 
     def errors(self) -> list[str]:
         """Messages logged with Error or Fatal status (what went wrong, in the FMU's words)."""
-        return [m for s, _, m in self.messages if s in ("Error", "Fatal")]
+        return [" ".join(m.split()) for s, _, m in self.messages if s in ("Error", "Fatal")]
 
     def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
         try:
@@ -205,11 +296,21 @@ class FmuInstance:
 
         After fmi2Fatal the standard allows no further call, so the instance is left alone (with
         pythonfmu 0.7, freeing it then releases Python objects twice and crashes the process
-        later)."""
+        later). Its library then stays loaded, so its extraction folder is kept (a second copy of
+        a pythonfmu library loaded from a new folder corrupts the heap) until the process exits."""
         if self._alive:
             self._alive = False
-            if not self.fatal:
-                self.slave.freeInstance()
+            if self.fatal:
+                self._extraction = None  # pinned: reused by the next instance, removed at exit
+                return
+            self.slave.freeInstance()
+        self._release()
+
+    def _release(self) -> None:
+        """Give back the extraction folder (removed when no instance uses it any more)."""
+        key, self._extraction = getattr(self, "_extraction", None), None
+        if key is not None:
+            _extractions.release(key)
 
 
 def fmi_value(kind: str, value: Any, name: str) -> Any:
@@ -221,7 +322,11 @@ def fmi_value(kind: str, value: Any, name: str) -> Any:
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, float) and not value.is_integer():
                 raise ValueError(value)
-            return int(value)
+            number = int(value)
+            if not INT32[0] <= number <= INT32[1]:
+                raise ValueError(f"variable {name}: {value!r} is beyond the 32-bit range of an"
+                                 f" FMI {kind} ({INT32[0]} .. {INT32[1]})")  # fmt: skip
+            return number
         if kind == "Boolean":
             if isinstance(value, str):
                 text = value.strip().lower()
@@ -230,5 +335,7 @@ def fmi_value(kind: str, value: Any, name: str) -> Any:
                 return text in ("true", "1")
             return bool(value)
         return str(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError) as exc:
+        if str(exc).startswith("variable "):
+            raise
         raise ValueError(f"variable {name}: {value!r} is not a valid {kind}") from None

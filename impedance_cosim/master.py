@@ -285,7 +285,7 @@ class Master:
             result = self._run(progress, sink, stop)
         if stop.signum is not None:
             t = result.data[-1, 0] if len(result.data) else self.start_time
-            result.error = f"interrupted by {signal_name(stop.signum)} at t={t:g} s"
+            result.error = f"interrupted by {signal_name(stop.signum)} at t={t:.9g} s"
             result.info["interrupted"] = stop.signum
             raise RunInterrupted(result.error, stop.signum, result)
         return result

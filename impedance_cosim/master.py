@@ -21,6 +21,9 @@
 - Every FMI status is checked. A failing FMU, a non-finite value or a value beyond
   `divergence_limit` stops the run with a message naming the signal and time; the rows computed so
   far are kept in the result.
+- Rows reach an optional sink as they are computed (results.py writes them to a CSV); SIGINT or
+  SIGTERM stops a run between blocks of steps and raises RunInterrupted with the rows so far
+  (interrupt.py). A run whose rows would not fit in memory is refused before it starts.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import gc
 import math
 import sys
 import time as wallclock
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -40,6 +43,7 @@ import numpy as np
 from impedance_cosim import fastloop
 from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, check_fmu, fmi_value
 from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
+from impedance_cosim.results import Feed, Sink, size_problem
 from impedance_cosim.ssp import SspError, SystemDescription
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
@@ -47,10 +51,6 @@ CHUNK = 400  # steps per call into the loop (progress bar, interrupts)
 RT_COLUMNS = ["rt.start_late_s", "rt.compute_s", "rt.lateness_s"]
 SPIN_S = 0.0005  # real time: busy-wait this long before each step's start (sleep overshoots)
 MAX_INIT_PASSES = 20
-MAX_RESULT_BYTES = 2**30  # the recorded rows of one run must fit in this (refused before running)
-
-
-Sink = Callable[[list[str], np.ndarray], None]  # (column names, new rows), see Master.run
 
 
 class MasterError(RuntimeError):
@@ -187,7 +187,11 @@ class Master:
                 raise MasterError(f"no component {name!r} to replace (have {names})")
             self.fmu_files[name] = Path(path)
         self.parameters = self._collect_parameters(overrides or {})
-        self._check_size(int(round(steps)))
+        columns = 1 + sum(len(real_outputs(md)) for md in self.descriptions.values())
+        columns += len(RT_COLUMNS) if realtime else 0
+        too_big = size_problem(int(round(steps)), columns, self.stop_time, self.step_size)
+        if too_big:
+            raise MasterError(too_big)
 
     # --- configuration checks -------------------------------------------------------------------
 
@@ -230,19 +234,6 @@ class Master:
                 v = self._parameter_variable(variables, comp, t, "given with --set")
                 values[comp][t] = self._value(v, value, f"{comp}.{t}")
         return values
-
-    def _check_size(self, steps: int) -> None:
-        """Refuse a run whose recorded rows would not fit in MAX_RESULT_BYTES."""
-        columns = 1 + (len(RT_COLUMNS) if self.realtime else 0)
-        for md in self.descriptions.values():
-            columns += sum(v.causality == "output" and v.type == "Real" for v in md.modelVariables)
-        need = (steps + 1) * columns * 8
-        if need > MAX_RESULT_BYTES:
-            raise MasterError(
-                f"stop time {self.stop_time:g} s at step {self.step_size:g} s is {steps:.3g} steps,"
-                f" whose results ({columns} columns) would take {need / 2**30:.3g} GiB of memory"
-                f" (limit {MAX_RESULT_BYTES / 2**30:g} GiB): use a shorter run or a longer step"
-            )
 
     def _parameter_variable(self, variables, comp: str, var: str, where: str):
         if comp not in variables:
@@ -297,21 +288,11 @@ class Master:
         h, t0 = self.step_size, self.start_time
         n = int(round((self.stop_time - t0) / h))
         data = np.empty((n + 1, len(names)))
-        rows, error, written = 0, None, -1  # written: rows given to the sink (-1: no header)
-        timing = None
+        rows, error = 0, None
+        timing = np.zeros((n + 1, len(RT_COLUMNS))) if self.realtime else None
         info: dict[str, Any] = {}
-
-        def emit() -> None:
-            nonlocal written
-            if sink is not None and rows != written:
-                block = data[max(written, 0) : rows]
-                if self.realtime:
-                    rt = timing[max(written, 0) : rows] if timing is not None else None
-                    block = np.hstack((block, np.zeros((len(block), 3)) if rt is None else rt))
-                written = rows
-                sink(record, block)
-
-        emit()
+        feed = Feed(sink, record)
+        feed(data, rows, timing)
         started = wallclock.perf_counter()
         bar = _Progress(n, h, sys.stderr if progress is True else progress) if progress else None
         ordered: list[_Slot] = []
@@ -322,7 +303,7 @@ class Master:
             self._initialize(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
-            emit()
+            feed(data, rows, timing)
             error = self._check_row(names, data[0], t0)
             fast = fastloop.load() if self.loop != "python" else None
             if self.loop == "c" and fast is None:
@@ -330,14 +311,13 @@ class Master:
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
-                timing = np.zeros((n + 1, len(RT_COLUMNS)))
                 rows, error = self._realtime_steps(step, ordered, data, names, timing, bar, stop)
                 info["realtime"] = realtime_stats(timing[1:rows], h)
             while not error and rows < n + 1 and stop.signum is None:
                 chunk = min(n + 1 - rows, CHUNK)
                 done, error = step(ordered, data, names, rows - 1, chunk)
                 rows += done
-                emit()
+                feed(data, rows, timing)
                 if bar:
                     bar.update(rows - 1)
             info["stepping_s"] = wallclock.perf_counter() - stepping
@@ -353,12 +333,11 @@ class Master:
                 except FmuError:
                     pass
                 s.fmu.free()
-            emit()
+            feed(data, rows, timing)
         data = data[:rows]
         if self.realtime:
             names = record
-            rt = timing[:rows] if timing is not None else np.zeros((rows, len(RT_COLUMNS)))
-            data = np.hstack((data, rt))
+            data = np.hstack((data, timing[:rows]))
         return RunResult(
             names=names,
             data=data,
@@ -527,10 +506,7 @@ class Master:
         if not bad.any():
             return None
         k = int(np.argmax(bad))
-        return (
-            f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g}"
-            f" (limit {self.divergence_limit:g}); results kept up to there"
-        )
+        return f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g} (limit {self.divergence_limit:g})"
 
 
 def realtime_stats(timing: np.ndarray, h: float) -> dict[str, Any]:

@@ -8,11 +8,44 @@ that reads back to the same double (Python's repr). fmpy.util.read_csv reads it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from impedance_cosim import atomic
+
+MAX_RESULT_BYTES = 2**30  # the recorded rows of one run must fit in this (refused before running)
+Sink = Callable[[list[str], np.ndarray], None]  # (column names, new rows), see Master.run
+
+
+def size_problem(steps: int, columns: int, stop: float, step: float) -> str | None:
+    """Why a run's recorded rows would not fit in MAX_RESULT_BYTES, or None."""
+    need = (steps + 1) * columns * 8
+    if need <= MAX_RESULT_BYTES:
+        return None
+    return (
+        f"stop time {stop:g} s at step {step:g} s is {steps:.3g} steps, whose results ({columns}"
+        f" columns) would take {need / 2**30:.3g} GiB of memory (limit"
+        f" {MAX_RESULT_BYTES / 2**30:g} GiB): use a shorter run or a longer step"
+    )
+
+
+class Feed:
+    """Gives a sink the rows of a run it has not had yet: the header (no rows) on the first call,
+    then data[written:rows] (with the extra columns beside, if any) on each later one."""
+
+    def __init__(self, sink: Sink | None, names: list[str]) -> None:
+        self.sink, self.names, self.written = sink, names, -1
+
+    def __call__(self, data: np.ndarray, rows: int, extra: np.ndarray | None = None) -> None:
+        if self.sink is None or rows == self.written:
+            return
+        first, self.written = max(self.written, 0), rows
+        block = data[first:rows]
+        if extra is not None:
+            block = np.hstack((block, extra[first:rows]))
+        self.sink(self.names, block)
 
 
 def format_rows(data: np.ndarray) -> str:

@@ -3,8 +3,8 @@
 While a `StopSignals` block is active, the first SIGINT or SIGTERM only records the signal; the
 master checks it between blocks of steps (so a signal reaching compiled code or a Python FMU
 never tears a step apart) and then raises `RunInterrupted` carrying the rows so far. A second
-signal raises KeyboardInterrupt at once (a way out of a step that hangs). Signals reach only
-the main thread: elsewhere (e.g. a dask worker thread) the block changes nothing.
+signal raises `RunInterrupted` at once, without rows (a way out of a step that hangs). Signals
+reach only the main thread: elsewhere (e.g. a dask worker thread) the block changes nothing.
 """
 
 from __future__ import annotations
@@ -51,7 +51,8 @@ class StopSignals:
 
     def _handle(self, signum: int, _frame: Any) -> None:
         if self.signum is not None:
-            raise KeyboardInterrupt
+            name = signal_name(signum)
+            raise RunInterrupted(f"interrupted again ({name}): stopped at once", signum)
         self.signum = signum
 
     def __enter__(self) -> StopSignals:

@@ -12,6 +12,7 @@ import tempfile
 import threading
 import zipfile
 from collections.abc import Iterable, Mapping
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -36,39 +37,53 @@ class FmuError(RuntimeError):
 
 def check_fmu(fmu: Path, description: Any) -> None:
     """FmuError naming the problem unless the archive is intact (every member's CRC) and has a
-    binary for this platform."""
+    binary for this platform (checked once per file version)."""
+    if description.coSimulation is None:
+        raise FmuError(f"{fmu.name} is not a co-simulation FMU")
+    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}"
+    st = fmu.stat()
+    problem = _archive_problem(str(fmu), st.st_mtime_ns, st.st_size, binary)
+    if problem:
+        raise FmuError(problem)
+
+
+@lru_cache(maxsize=256)
+def _archive_problem(fmu: str, _mtime_ns: int, _size: int, binary: str) -> str | None:
+    name = Path(fmu).name
     try:
         with zipfile.ZipFile(fmu) as z:
             bad = z.testzip()
             names = set(z.namelist())
     except (zipfile.BadZipFile, OSError, EOFError, RuntimeError) as exc:
-        raise FmuError(f"{fmu.name} is not a readable FMU archive ({exc})") from None
+        return f"{name} is not a readable FMU archive ({exc})"
     if bad is not None:
-        raise FmuError(f"{fmu.name}: archive member {bad} is corrupt (CRC check failed)")
-    if description.coSimulation is None:
-        raise FmuError(f"{fmu.name} is not a co-simulation FMU")
-    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}"
+        return f"{name}: archive member {bad} is corrupt (CRC check failed)"
     if binary + sharedLibraryExtension not in names:
         have = sorted(
             {n.split("/")[1] for n in names if n.count("/") >= 2 and n[:9] == "binaries/"}
         )
-        raise FmuError(
-            f"{fmu.name} has no binary for this platform ({binary}{sharedLibraryExtension}; "
+        return (
+            f"{name} has no binary for this platform ({binary}{sharedLibraryExtension}; "
             f"binaries for: {', '.join(have) or 'none'})"
         )
+    return None
 
 
 class _Extractions:
-    """fmpy extraction folders shared by the instances of one FMU file, removed when the last
-    instance is freed (and at exit, for any still there)."""
+    """fmpy's extraction folders, one per FMU file version, shared by its instances for the life
+    of the process (extracting again for every run cost ~0.1 s per run). A folder is removed at
+    exit, or earlier once no instance uses it and its FMU file has gone or changed (e.g. the
+    temporary folder of a system archive was removed)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._entries: dict[tuple[Path, float], list] = {}  # key -> [description, folder, users]
+        self._entries: dict[tuple, list] = {}  # (path, mtime_ns, size) -> [description, dir, users]
 
-    def acquire(self, fmu: Path) -> tuple[tuple[Path, float], Any, str]:
-        key = (fmu, fmu.stat().st_mtime)
+    def acquire(self, fmu: Path) -> tuple[tuple, Any, str]:
+        st = fmu.stat()
+        key = (fmu, st.st_mtime_ns, st.st_size)
         with self._lock:
+            self._prune()
             entry = self._entries.get(key)
             if entry is None:
                 try:
@@ -86,15 +101,21 @@ class _Extractions:
             entry[2] += 1
             return key, entry[0], entry[1]
 
-    def release(self, key: tuple[Path, float]) -> None:
+    def release(self, key: tuple) -> None:
         with self._lock:
-            entry = self._entries.get(key)
-            if entry is None:
-                return
-            entry[2] -= 1
-            if entry[2] <= 0:
+            if key in self._entries:
+                self._entries[key][2] -= 1
+
+    def _prune(self) -> None:
+        for key, (_, folder, users) in list(self._entries.items()):
+            try:
+                st = key[0].stat()
+                current = (st.st_mtime_ns, st.st_size) == key[1:]
+            except OSError:
+                current = False
+            if users <= 0 and not current:
                 del self._entries[key]
-                shutil.rmtree(entry[1], ignore_errors=True)
+                shutil.rmtree(folder, ignore_errors=True)
 
     def clear(self) -> None:
         with self._lock:
@@ -301,13 +322,13 @@ class FmuInstance:
         if self._alive:
             self._alive = False
             if self.fatal:
-                self._extraction = None  # pinned: reused by the next instance, removed at exit
+                self._extraction = None  # still in use: never pruned, removed at exit
                 return
             self.slave.freeInstance()
         self._release()
 
     def _release(self) -> None:
-        """Give back the extraction folder (removed when no instance uses it any more)."""
+        """Give back the extraction folder (see _Extractions)."""
         key, self._extraction = getattr(self, "_extraction", None), None
         if key is not None:
             _extractions.release(key)

@@ -251,8 +251,11 @@ def _dispatch(args: argparse.Namespace) -> int:
     prefix = f"impedance-cosim {args.command}:"
     try:
         return args.func(args)
-    except (CliError, MasterError, SspError, ValueError, FileNotFoundError) as exc:
+    except CliError as exc:  # our own wording (may list several problems, one per line)
         print(f"{prefix} error: {exc}", file=sys.stderr)
+        return 2
+    except (MasterError, SspError, ValueError, FileNotFoundError) as exc:
+        print(f"{prefix} error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except FolderBusyError as exc:
         print(f"{prefix} refused: {exc}", file=sys.stderr)
@@ -265,14 +268,18 @@ def _dispatch(args: argparse.Namespace) -> int:
         print(f"{prefix} interrupted ({signal_name(signum)})", file=sys.stderr)
         return 128 + signum
     except (FmuError, OSError) as exc:
-        print(f"{prefix} error: {exc}", file=sys.stderr)
+        print(f"{prefix} error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except Exception as exc:  # a bug: still one line; the traceback on request
         if os.environ.get("IMPEDANCE_COSIM_DEBUG"):
             raise
-        print(f"{prefix} internal error: {type(exc).__name__}: {exc} (set IMPEDANCE_COSIM_DEBUG=1"
-              " for the traceback)", file=sys.stderr)  # fmt: skip
+        print(f"{prefix} internal error: {type(exc).__name__}: {_one_line(exc)} (set"
+              " IMPEDANCE_COSIM_DEBUG=1 for the traceback)", file=sys.stderr)  # fmt: skip
         return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
 
 
 if __name__ == "__main__":

@@ -333,3 +333,37 @@ def test_two_builds_into_one_folder_at_once(tmp_path):
         with zipfile.ZipFile(path) as z:
             assert z.testzip() is None, path
     assert read_ssp(out / "PaperScenario.ssp").parameter_sets
+
+
+@pytest.mark.parametrize("loop", ["c", "python"])
+def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
+    """In process: the sink's blocks are the result's rows; SIGINT (sent from the sink, so
+    mid-run) stops the run after the block under way with RunInterrupted and every row kept."""
+    import numpy as np
+
+    from impedance_cosim.interrupt import RunInterrupted
+    from impedance_cosim.master import Master
+    from impedance_cosim.ssp import read_ssp
+
+    system = read_ssp(native_ssp)
+    blocks: list = []
+    done = Master(system, stop_time=2.0, loop=loop).run(sink=lambda n, b: blocks.append(b.copy()))
+    assert len(blocks[0]) == 0 and np.array_equal(np.vstack(blocks), done.data)
+
+    blocks.clear()
+
+    def sink(names, block):
+        blocks.append(block.copy())
+        if sum(map(len, blocks)) > 1000 and not sent:
+            sent.append(signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+
+    sent: list = []
+
+    with pytest.raises(RunInterrupted) as caught:
+        Master(system, stop_time=400.0, loop=loop).run(sink=sink)
+    kept = caught.value.result.data
+    assert np.array_equal(np.vstack(blocks), kept) and 1000 < len(kept) < 2000
+    assert np.array_equal(kept[:801], done.data)
+    assert caught.value.message == f"interrupted by SIGINT at t={kept[-1, 0]:.9g} s"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored

@@ -32,11 +32,11 @@ class FolderBusyError(RuntimeError):
     """Another process holds the lock on a folder."""
 
 
-def temp_path(target: str | Path) -> Path:
+def temp_path(target: str | Path, suffix: str = ".tmp") -> Path:
     """A new, empty, uniquely named file beside target (".name.XXXXXX.tmp"), removed at exit
     unless it has been renamed into place."""
     target = Path(target)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=target.parent)
     os.close(fd)
     path = Path(name)
     os.chmod(path, 0o666 & ~_UMASK)  # as open() would create it (mkstemp makes it private)

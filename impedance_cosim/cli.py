@@ -160,9 +160,9 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
         f.write(json.dumps(values, indent=2) + "\n")
     if args.no_figures:
         return 0
-    analysis.figure_1(main, out / "fig1_position_force.png")
-    analysis.figure_2(main, out / "fig2_observer.png")
-    analysis.figure_3(main, out / "fig3_velocity_tracking.png")
+    _figure(analysis.figure_1, out / "fig1_position_force.png", main)
+    _figure(analysis.figure_2, out / "fig2_observer.png", main)
+    _figure(analysis.figure_3, out / "fig3_velocity_tracking.png", main)
     pair = {"observer": None, "difference": None}
     source = str(overrides.get("controller.velocity_source", "")) or main.parameter_set
     if source in pair:
@@ -173,11 +173,23 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     if any(r is not None and not r.ok for r in pair.values()):
         return 1
     if all(r is not None for r in pair.values()):
-        analysis.figure_4(
-            pair["observer"], pair["difference"], out / "fig4_observer_vs_difference.png"
-        )
+        fig4 = out / "fig4_observer_vs_difference.png"
+        _figure(analysis.figure_4, fig4, pair["observer"], pair["difference"])
     print(f"figures in {out}/")
     return 0
+
+
+def _figure(draw, path: Path, *runs) -> None:
+    """draw(*runs, path) through a temporary file renamed into place (a figure is whole or old)."""
+    from impedance_cosim import atomic
+
+    tmp = atomic.temp_path(path, suffix=".tmp" + path.suffix)  # the suffix picks the format
+    try:
+        draw(*runs, tmp)
+    except BaseException:
+        atomic.discard(tmp)
+        raise
+    atomic.replace(tmp, path)
 
 
 def _echo_fmu_output(text: str, stream) -> None:

@@ -33,7 +33,7 @@ class _Parser(argparse.ArgumentParser):
 def _cmd_build(args: argparse.Namespace) -> int:
     from impedance_cosim.build import build_all
 
-    for path in build_all(Path(args.out), args.only or None):
+    for path in build_all(prepare_out(Path(args.out)), args.only or None):
         print(f"built {path}")
     return 0
 

@@ -155,7 +155,7 @@ CASES = [
     ("python", ["--set", "plant.noise_seed=4294967297"], 2, "beyond the 32-bit range", None),
     ("python", ["--set", "controller.K=nan"], 1, "parameter K1 must be finite", 0),
     ("python", ["--set", "plant.m1=-1"], 1, "parameter m1 must be >= 0.0", 0),
-    ("native", ["--set", "plant.m1=-1"], 1, "m1", 0),
+    ("native", ["--set", "plant.m1=-1"], 1, "parameter m1 must be >= 0", 0),
     ("python", ["--set", "controller.G=1e9"], 1, "contact chattering", 3),
     ("NaN in parameter set", [], 1, "parameter wall_k must be finite", 0),
     ("bad CRC", [], 2, "binaries/linux64/PumaPlant.so is corrupt (CRC check failed)", None),

@@ -371,3 +371,23 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
     assert np.array_equal(kept[:801], done.data)
     assert caught.value.message == f"interrupted by SIGINT at t={kept[-1, 0]:.9g} s"
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored
+
+
+@pytest.mark.parametrize(
+    "kwargs,message",
+    [
+        ({"step_size": 0.0}, "step size must be a finite number > 0 (got 0.0)"),
+        ({"step_size": -1.0}, "step size must be a finite number > 0"),
+        ({"step_size": float("nan")}, "step size must be a finite number > 0"),
+        ({"stop_time": float("inf")}, "stop time must be finite"),
+        ({"stop_time": float("nan")}, "stop time must be finite"),
+        ({"stop_time": 1e300}, "GiB of memory"),
+    ],
+)
+def test_master_refuses_bad_times(native_ssp, kwargs, message):
+    """The API too: a zero step is refused, not replaced by the default."""
+    from impedance_cosim.master import Master, MasterError
+    from impedance_cosim.ssp import read_ssp
+
+    with pytest.raises(MasterError, match=re.escape(message)):
+        Master(read_ssp(native_ssp), **kwargs)

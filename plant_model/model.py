@@ -15,7 +15,7 @@ from typing import Any
 
 from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import Variable, parameters_of, vector
+from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
 from impedance_cosim.ode import IntegrationError, integrate
 from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
 
@@ -28,8 +28,18 @@ class PlantSetup:
     y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
     phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
     elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
-    q_quant: float = _p(0.0, "rad", "Joint encoder resolution (0: no quantization)", 0.0)
-    q_noise: float = _p(0.0, "rad", "Std. dev. of Gaussian joint-angle noise (0: none)", 0.0)
+    q_quant: float = _p(
+        0.0,
+        "rad",
+        "Joint encoder resolution (0: none; Model Exchange: ideal encoders, 0 only)",
+        0.0,
+    )
+    q_noise: float = _p(
+        0.0,
+        "rad",
+        "Std. dev. of Gaussian joint-angle noise (0: none; Model Exchange: ideal encoders, 0 only)",
+        0.0,
+    )
     noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
     rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
     atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)
@@ -53,6 +63,13 @@ class PlantModel(FmuModel):
         " wrist force/torque out, plus truth signals for analysis"
     )
     OUTPUT_DEPENDENCIES = ""  # outputs depend on the state only: no direct feedthrough
+    # The native flavour also offers Model Exchange (native/src/fmi2_me.c): these continuous
+    # states, their der() variables, and one event indicator (the contact's switching function).
+    # The tolerance a host's solver should use (the plant's own integrator runs at rtol 1e-9).
+    DEFAULT_EXPERIMENT = {**FmuModel.DEFAULT_EXPERIMENT, "tolerance": 1e-9}
+    MODEL_EXCHANGE = ModelExchange(
+        states=("q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3"), event_indicators=1
+    )
 
     @classmethod
     def variables(cls) -> list[Variable]:

@@ -16,23 +16,7 @@
 #include "fmi2Functions.h"
 #include "glue.h"
 #include "guid.h" /* MODEL_GUID, written by the build */
-
-typedef enum { S_INSTANTIATED, S_INITIALIZATION, S_STEP_COMPLETE, S_TERMINATED } Phase;
-
-typedef struct {
-    Data d;
-    Phase phase;
-    int dirty; /* outputs must be recomputed before they are read (initialization mode) */
-    double last_time;
-} Snapshot; /* everything an FMU state holds */
-
-typedef struct {
-    Snapshot s;
-    fmi2CallbackFunctions cb;
-    char name[128];
-    int logging_on;
-    char msg[MSG_MAX];
-} Instance;
+#include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is fmi2_me.c */
 
 #define SERIAL_MAGIC 0x494d5043u /* "IMPC" */
 
@@ -52,8 +36,7 @@ int fail(char *msg, const char *fmt, ...)
     return 1;
 }
 
-static void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt,
-                        ...)
+void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...)
 {
     char text[MSG_MAX + 64];
     va_list ap;
@@ -79,8 +62,6 @@ static void log_message(Instance *inst, fmi2Status status, const char *category,
     safe[k] = '\0';
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
 }
-
-#define ERROR(inst, ...) (log_message((inst), fmi2Error, "logStatusError", __VA_ARGS__), fmi2Error)
 
 static void set_start_values(Data *d)
 {
@@ -125,6 +106,9 @@ static int initialize(Instance *inst)
     if (model_initialize(&tmp, inst->msg)) {
         return 1;
     }
+    if (inst->type == fmi2ModelExchange && me_initialize(&tmp, inst->msg)) {
+        return 1;
+    }
     inst->s.d = tmp;
     inst->s.dirty = 0;
     return 0;
@@ -155,7 +139,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->cb = *functions;
     strncpy(inst->name, instanceName ? instanceName : "", sizeof inst->name - 1);
     inst->logging_on = loggingOn;
-    if (fmuType != fmi2CoSimulation) {
+    inst->type = fmuType;
+    if (fmuType != fmi2CoSimulation && !(fmuType == fmi2ModelExchange && ME_SUPPORTED)) {
         log_message(inst, fmi2Error, "logStatusError", "%s supports co-simulation only",
                     MODEL_IDENTIFIER_STR);
         free(inst);
@@ -239,7 +224,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     if (inst->s.dirty && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);
     }
-    inst->s.phase = S_STEP_COMPLETE;
+    inst->s.phase = inst->type == fmi2ModelExchange ? S_EVENT_MODE : S_STEP_COMPLETE;
     return fmi2OK;
 }
 
@@ -249,7 +234,7 @@ fmi2Status fmi2Terminate(fmi2Component c)
     if (!inst) {
         return fmi2Error;
     }
-    if (inst->s.phase != S_STEP_COMPLETE) {
+    if (inst->s.phase < S_STEP_COMPLETE || inst->s.phase == S_TERMINATED) {
         return ERROR(inst, "fmi2Terminate called before initialization finished or twice");
     }
     inst->s.phase = S_TERMINATED;
@@ -266,6 +251,7 @@ fmi2Status fmi2Reset(fmi2Component c)
     inst->s.phase = S_INSTANTIATED;
     inst->s.dirty = 1;
     inst->s.last_time = 0.0;
+    inst->s.me_time_set = 0;
     return fmi2OK;
 }
 
@@ -294,6 +280,10 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
             if (v->causality == C_OUTPUT) {
                 return ERROR(inst, "variable %s is an output: it cannot be set", v->name);
             }
+            if (v->causality == C_LOCAL) {
+                return ERROR(inst, "variable %s is computed by the model: it cannot be set",
+                             v->name);
+            }
             if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION) {
                 return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
                              v->name);
@@ -309,12 +299,15 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
     if (!setting && inst->s.dirty && inst->s.phase == S_INITIALIZATION && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);
     }
+    if (!setting && inst->type == fmi2ModelExchange && inst->s.phase > S_INITIALIZATION) {
+        return me_update(inst);
+    }
     return fmi2OK;
 }
 
 static void mark_dirty(Instance *inst)
 {
-    if (inst->s.phase <= S_INITIALIZATION) {
+    if (inst->s.phase <= S_INITIALIZATION || inst->type == fmi2ModelExchange) {
         inst->s.dirty = 1;
     }
 }

@@ -41,7 +41,14 @@ from typing import Any, TextIO
 import numpy as np
 
 from impedance_cosim import fastloop
-from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, check_fmu, fmi_value
+from impedance_cosim.fmu import (
+    STATUS,
+    FmuError,
+    FmuInstance,
+    check_fmu,
+    fmi_value,
+    model_description,
+)
 from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
 from impedance_cosim.results import Feed, Sink, size_problem
 from impedance_cosim.ssp import SspError, SystemDescription
@@ -144,6 +151,7 @@ class Master:
         fmu_files: Mapping[str, Path] | None = None,
         loop: str = "auto",
         realtime: bool = False,
+        instances: Any = None,
     ) -> None:
         self.system = system
         self.algorithm = algorithm or system.algorithm or "gauss-seidel"
@@ -170,6 +178,7 @@ class Master:
             raise MasterError(f"loop must be auto, c or python (got {loop!r})")
         self.loop = loop
         self.realtime = realtime
+        self.instances = instances  # an fmu_pool.InstancePool: reuse FMU instances across runs
         sets = system.parameter_sets
         if parameter_set is None:
             parameter_set = next(iter(sets), "")
@@ -197,14 +206,12 @@ class Master:
 
     def _collect_parameters(self, overrides: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
         """Parameter values per component, checked against the FMUs' variables and units."""
-        from fmpy import read_model_description
-
         self.descriptions = {}
         for name, path in self.fmu_files.items():
             if not path.is_file():
                 raise MasterError(f"component {name}: FMU {path} does not exist")
             try:
-                self.descriptions[name] = read_model_description(str(path))
+                self.descriptions[name] = model_description(path)
             except Exception as exc:
                 raise MasterError(f"component {name}: cannot read {path.name}: {exc}") from None
             try:
@@ -298,7 +305,9 @@ class Master:
         ordered: list[_Slot] = []
         try:
             for name in self.order:
-                ordered.append(_Slot(name, FmuInstance(self.fmu_files[name], name)))
+                path = self.fmu_files[name]
+                fmu = self.instances.take(path, name) if self.instances else FmuInstance(path, name)
+                ordered.append(_Slot(name, fmu))
             self._wire(ordered)
             self._initialize(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
@@ -330,9 +339,10 @@ class Master:
             for s in ordered:
                 try:
                     s.fmu.terminate()
+                    clean = error is None
                 except FmuError:
-                    pass
-                s.fmu.free()
+                    clean = False
+                self.instances.give(s.fmu, clean) if self.instances else s.fmu.free()
             feed(data, rows, timing)
         data = data[:rows]
         if self.realtime:

@@ -47,7 +47,7 @@ def best(repeat: int, fn) -> float:
 def master_table(stop: float, repeat: int, fmpy: bool) -> None:
     python, native = DEFAULT_OUT / "PaperScenario.ssp", DEFAULT_OUT / "PaperScenario-native.ssp"
     steps = round(stop * 400)
-    rows = [("plain Python models, no FMI", best(repeat, lambda: run_models(stop_time=stop)))]
+    rows = [("plain Python models, no FMI", best(repeat, lambda: run_models(stop_time=stop)), None)]
     for name, ssp, loop in (
         ("Python FMUs, our master (C loop)", python, "c"),
         ("Python FMUs, our master (Python loop)", python, "python"),
@@ -55,20 +55,26 @@ def master_table(stop: float, repeat: int, fmpy: bool) -> None:
         ("native FMUs, our master (Python loop)", native, "python"),
     ):
         system = read_ssp(ssp)
+        stepping = []
 
-        def run(system=system, loop=loop) -> None:
+        def run(system=system, loop=loop, stepping=stepping) -> None:
             result = Master(system, stop_time=stop, loop=loop).run()
             assert result.ok, result.error
+            stepping.append(result.info["stepping_s"])
 
-        rows.append((name, best(repeat, run)))
+        rows.append((name, best(repeat, run), min(stepping)))
     if fmpy:
-        rows.append(("Python FMUs, fmpy simulate_ssp (Jacobi)", time_fmpy(python, stop, 1 / 400)))
+        t = time_fmpy(python, stop, 1 / 400)
+        rows.append(("Python FMUs, fmpy simulate_ssp (Jacobi)", t, None))
     models = rows[0][1]
     print(f"\n{stop:g} s paper scenario, {steps} steps at 400 Hz, best of {repeat}")
-    print(f"{'':42} {'wall s':>8} {'x real time':>12} {'overhead us/step':>17}")
-    for name, t in rows:
+    print(f"{'':42} {'wall s':>8} {'x real time':>12} {'overhead us/step':>17} "
+          f"{'stepping s':>11} {'x real time':>12}")  # fmt: skip
+    for name, t, ts in rows:
         overhead = f"{1e6 * (t - models) / steps:17.1f}" if name.startswith("Python FMUs") else ""
-        print(f"{name:42} {t:8.3f} {stop / t:12.1f} {overhead:>17}")
+        stepping = f"{ts:11.3f} {stop / ts:12.0f}" if ts else ""
+        print(f"{name:42} {t:8.3f} {stop / t:12.1f} {overhead:>17} {stepping}")
+    print(f"native vs Python FMUs (C loop, whole run): {rows[1][1] / rows[3][1]:.0f}x faster")
 
 
 @contextlib.contextmanager

@@ -22,6 +22,7 @@ import json
 import math
 import struct
 import sys
+import weakref
 from typing import Any
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Variability, Integer, Real, String
@@ -60,7 +61,11 @@ class ModelSlave:
         self._dirty = True
         self._start_time = 0.0
         self.model: FmuModel | None = None
-        type(self)._live = [*getattr(type(self), "_live", []), self]
+        live = type(self).__dict__.get("_live")
+        if live is None:  # the instances _survive_fatal must keep alive, per slave class
+            live = weakref.WeakSet()
+            type(self)._live = live  # type: ignore[attr-defined]
+        live.add(self)
         for v in self._table:
             var_cls = _PY_VAR[v.type]
             if v.causality == "output":

@@ -119,37 +119,38 @@ def _field(blob: bytes, offset: int, fmt: str):
     return struct.unpack_from(fmt, blob, len(blob) + offset if offset < 0 else offset)[0]
 
 
-def crafted_states(s: Slave, blob: bytes, name: str) -> dict[str, bytes]:
-    """Valid serialized state -> crafted variants, each breaking one field the model reads."""
+def crafted_state(s: Slave, blob: bytes, name: str, field: str) -> bytes:
+    """Valid serialized state -> a crafted variant breaking one field the model reads."""
     n = len([v for v in s.md.modelVariables])
     # the offsets are right: the valid state holds the values we expect there
     assert _field(blob, PHASE, "<i") == 2 and _field(blob, DIRTY, "<i") == 0
     assert _field(blob, LAST_TIME, "<d") == 4 * DT
-    cases = {
-        "phase": _poke(blob, PHASE, "<i", 77),
-        "dirty": _poke(blob, DIRTY, "<i", -3),
-        "last_time": _poke(blob, LAST_TIME, "<d", math.inf),
-        "start_time": _poke(blob, START_TIME, "<d", math.nan),
-        "parameter_nan": _poke(blob, HEADER + 8 * s.vr["a1"], "<d", math.nan),
-        "parameter_below_min": _poke(blob, HEADER + 8 * s.vr["m1"], "<d", -1.0),
-    }
     if name == PLANT:
         assert 0 <= _field(blob, PLANT_RNG_INDEX, "<i") <= 624
-        cases["rng_index_huge"] = _poke(blob, PLANT_RNG_INDEX, "<i", 100_000_000)
-        cases["rng_index_negative"] = _poke(blob, PLANT_RNG_INDEX, "<i", -100_000_000)
-        cases["rng_flag"] = _poke(blob, PLANT_GAUSS_FLAG, "<i", 9)
-        cases["boolean"] = _poke(blob, HEADER + 8 * n + 4 * s.vr["elbow_up"], "<i", 5)
-        cases["input_inf"] = _poke(blob, HEADER + 8 * s.vr["tau1"], "<d", math.inf)
     else:
         assert _field(blob, CONTROLLER_K_NEXT, "<q") == 4  # samples 0..3 taken
         assert _field(blob, CONTROLLER_SOURCE, "<i") == 0
-        cases["k_next_negative"] = _poke(blob, CONTROLLER_K_NEXT, "<q", -(2**62))
-        cases["source_enum"] = _poke(blob, CONTROLLER_SOURCE, "<i", 1000)
-        at = HEADER + 12 * n + 64 * s.vr["velocity_source"]
-        cases["string_unterminated"] = blob[:at] + b"A" * 64 + blob[at + 64 :]
-        cases["max_samples_zero"] = _poke(blob, HEADER + 8 * n + 4 * s.vr["max_samples_per_step"],
-                                          "<i", 0)  # fmt: skip
-    return cases
+    at = HEADER + 12 * n + 64 * s.vr.get("velocity_source", 0)
+    cases = {
+        "phase": lambda: _poke(blob, PHASE, "<i", 77),
+        "dirty": lambda: _poke(blob, DIRTY, "<i", -3),
+        "last_time": lambda: _poke(blob, LAST_TIME, "<d", math.inf),
+        "start_time": lambda: _poke(blob, START_TIME, "<d", math.nan),
+        "parameter_nan": lambda: _poke(blob, HEADER + 8 * s.vr["a1"], "<d", math.nan),
+        "parameter_below_min": lambda: _poke(blob, HEADER + 8 * s.vr["m1"], "<d", -1.0),
+        "rng_index_huge": lambda: _poke(blob, PLANT_RNG_INDEX, "<i", 100_000_000),
+        "rng_index_negative": lambda: _poke(blob, PLANT_RNG_INDEX, "<i", -100_000_000),
+        "rng_flag": lambda: _poke(blob, PLANT_GAUSS_FLAG, "<i", 9),
+        "boolean": lambda: _poke(blob, HEADER + 8 * n + 4 * s.vr["elbow_up"], "<i", 5),
+        "input_inf": lambda: _poke(blob, HEADER + 8 * s.vr["tau1"], "<d", math.inf),
+        "k_next_negative": lambda: _poke(blob, CONTROLLER_K_NEXT, "<q", -(2**62)),
+        "source_enum": lambda: _poke(blob, CONTROLLER_SOURCE, "<i", 1000),
+        "string_unterminated": lambda: blob[:at] + b"A" * 64 + blob[at + 64 :],
+        "max_samples_zero": lambda: _poke(
+            blob, HEADER + 8 * n + 4 * s.vr["max_samples_per_step"], "<i", 0
+        ),
+    }
+    return cases[field]()
 
 
 def case_crafted(path: str, field: str) -> None:
@@ -159,7 +160,7 @@ def case_crafted(path: str, field: str) -> None:
     for k in range(4):
         assert s.step(k * DT, DT) == OK
     blob = s.serialize(s.get_state())
-    crafted = crafted_states(s, blob, name)[field]
+    crafted = crafted_state(s, blob, name, field)
     before = s.outputs()
     status, state = s.deserialize(crafted)
     print(f"status={status}")
@@ -210,9 +211,12 @@ def case_big_step(path: str, h: str, param: str) -> None:
     assert s.step(0.0, DT) == OK  # still at t = 0, and usable
 
 
-def case_python_garbage_state(path: str) -> None:
-    from impedance_cosim.fmi.slave import STATE_HEADER, STATE_MAGIC
+# impedance_cosim.fmi.slave's state framing, restated: importing it here would make the FMU use
+# this checkout's slave module instead of its own (one module cache per process)
+STATE_MAGIC, STATE_HEADER = b"IMPCPY1\n", struct.Struct(">8sQ32s")
 
+
+def case_python_garbage_state(path: str) -> None:
     s = Slave(path)
     s.init()
     assert s.step(0.0, DT) == OK
@@ -344,6 +348,12 @@ def test_python_fmu_refuses_garbage_state_bytes(fmu_dir):
         assert "done" in done.stdout
         refusals = [ln for ln in done.stderr.splitlines() if "serialized FMU state refused" in ln]
         assert len(refusals) == 8, done.stderr
+
+
+def test_driver_frames_states_like_the_slave():
+    from impedance_cosim.fmi import slave
+
+    assert (slave.STATE_MAGIC, slave.STATE_HEADER.format) == (STATE_MAGIC, STATE_HEADER.format)
 
 
 @pytest.mark.xfail(strict=True, reason="pythonfmu 0.7's C++ wrapper deletes the component twice")

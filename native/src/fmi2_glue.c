@@ -529,7 +529,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     if (model_step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg)) {
         inst->s.d.m = backup_m;
         memcpy(inst->s.d.r, backup_r, sizeof backup_r);
-        log_message(inst, fmi2Discard, "logStatusError", "at t=%.17g: %s",
+        log_message(inst, fmi2Error, "logStatusError", "at t=%.17g: %s",
                     currentCommunicationPoint, inst->msg);
         inst->s.last_time = currentCommunicationPoint;
         return fmi2Discard;

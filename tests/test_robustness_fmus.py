@@ -211,6 +211,14 @@ def case_big_step(path: str, h: str, param: str) -> None:
     assert s.step(0.0, DT) == OK  # still at t = 0, and usable
 
 
+def case_nan_time(path: str) -> None:
+    s = Slave(path)
+    s.init()
+    print(f"nan={s.step(math.nan, DT)} inf={s.step(math.inf, DT)}", flush=True)
+    print(f"after={s.step(0.0, DT)}")
+    print("log=" + " | ".join(s.logs))
+
+
 # impedance_cosim.fmi.slave's state framing, restated: importing it here would make the FMU use
 # this checkout's slave module instead of its own (one module cache per process)
 STATE_MAGIC, STATE_HEADER = b"IMPCPY1\n", struct.Struct(">8sQ32s")
@@ -253,6 +261,7 @@ CASES = {
     "double_free": case_double_free,
     "big_step": case_big_step,
     "python_garbage_state": case_python_garbage_state,
+    "nan_time": case_nan_time,
 }
 
 
@@ -333,6 +342,22 @@ def test_steps_needing_too_much_work_are_refused(
     assert done.returncode == 0, done.stderr
     assert f"status={DISCARD}" in done.stdout
     assert message in done.stdout + done.stderr
+
+
+@pytest.mark.parametrize("flavour", ["python", "native"])
+@pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+def test_non_finite_communication_point_is_refused(fmu_dir, native_dir, flavour, name):
+    """doStep(NaN, h) passed the models' time check (NaN compares false) and took the FMU to
+    t = NaN; now refused (native: fmi2Error, an illegal argument; Python: fmi2Discard, as
+    pythonfmu can only return that without going fatal), and the FMU is still at t = 0."""
+    if flavour == "native" and shutil.which("gcc") is None:
+        pytest.skip("needs a C compiler")
+    path = (native_dir if flavour == "native" else fmu_dir) / name
+    done = run("nan_time", path)
+    assert done.returncode == 0, done.stderr
+    refused = ERROR if flavour == "native" else DISCARD
+    assert f"nan={refused} inf={refused}" in done.stdout and f"after={OK}" in done.stdout
+    assert "communication point nan is not finite" in done.stdout + done.stderr
 
 
 def test_python_fmu_refuses_garbage_state_bytes(fmu_dir):

@@ -133,6 +133,9 @@ class ModelSlave:
         if self._phase != STEPPING or self.model is None:
             self._report("doStep called before initialization finished")
             return False
+        if not math.isfinite(current_time):  # NaN would pass the model's time check
+            self._report(f"doStep: communication point {current_time} is not finite")
+            return False
         try:
             self.model.do_step(current_time, step_size, self._input_values())
         except ModelError as exc:

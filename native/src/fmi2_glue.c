@@ -522,6 +522,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
         return ERROR(inst, "fmi2DoStep called before initialization finished or after "
                            "fmi2Terminate");
     }
+    if (!isfinite(currentCommunicationPoint)) { /* NaN would pass the model's time check */
+        return ERROR(inst, "fmi2DoStep: communication point %g is not finite",
+                     currentCommunicationPoint);
+    }
     /* A model step writes only the model state and the outputs: back those up, restore them if
      * the step is refused (cheaper than stepping a full copy of Data). */
     backup_m = inst->s.d.m;

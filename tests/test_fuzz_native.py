@@ -1,8 +1,7 @@
 """Fuzz test of the native FMUs (issue 10): random FMI call sequences and values from a fixed
 seed, run in a subprocess so that a crash or a hang is a test failure naming the seed and the
-call. This file is also the driver: `python test_fuzz_native.py FMU SEED CALLS PROGRESS [safe]`
-(FMU may be a comma-separated list; safe: no calls on freed instances or states, for valgrind,
-which rightly reports those reads).
+call. This file is also the driver: `python test_fuzz_native.py FMU SEED CALLS PROGRESS` (FMU may
+be a comma-separated list).
 
 The driver calls the raw fmi2* functions through ctypes: any instance/state order (terminate,
 reset, free, calls after free), every type with NaN, inf, huge, negative values and unknown value
@@ -35,14 +34,13 @@ WORK_BOUNDS = ("max_rhs_evaluations", "max_samples_per_step")
 class Fuzzer:
     """Random FMI calls against one FMU binary (see the module docstring)."""
 
-    def __init__(self, path: str, seed: int, progress, safe: bool) -> None:
+    def __init__(self, path: str, seed: int, progress) -> None:
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
         from fmpy.fmi2 import defaultCallbacks as default_callbacks  # noqa: N813
 
         self.rng = random.Random(seed)
         self.progress = progress
-        self.safe = safe
         md = read_model_description(path)
         self.guid = md.guid.encode()
         self.vars = md.modelVariables
@@ -110,7 +108,7 @@ class Fuzzer:
 
     def component(self) -> int | None:
         r = self.rng
-        if self.dead and not self.safe and r.random() < 0.03:
+        if self.dead and r.random() < 0.03:
             return r.choice(self.dead)  # use after free: must be refused
         if not self.live:
             return None
@@ -240,7 +238,7 @@ class Fuzzer:
                     self.states.append((c, ptr.value))
         elif op == "set" and own:
             self.f["fmi2SetFMUstate"](c, ctypes.c_void_p(r.choice(own)[1]))
-        elif op == "set" and self.dead_states and not self.safe:
+        elif op == "set" and self.dead_states:
             self.f["fmi2SetFMUstate"](c, ctypes.c_void_p(r.choice(self.dead_states)[1]))
         elif op == "free" and own:
             s = r.choice(own)
@@ -348,7 +346,9 @@ def test_fuzz_native_fmu_does_not_crash(native_dir, tmp_path, name, seed):
 
 def errors_in(valgrind_log: str, library: str) -> list[str]:
     """valgrind's error reports whose stack passes through the FMU's library (the Python
-    interpreter itself is not valgrind-clean, so reports only in its own code are ignored)."""
+    interpreter itself is not valgrind-clean, so reports only in its own code are ignored),
+    except the reads of the tag at offset 0 of a freed instance or state: that read is how the
+    FMU recognises a freed pointer (reading freed memory, which valgrind rightly reports)."""
     blocks, current = [], []
     for line in valgrind_log.splitlines():
         text = line.split("== ", 1)[-1] if line.startswith("==") else None
@@ -360,18 +360,28 @@ def errors_in(valgrind_log: str, library: str) -> list[str]:
             blocks.append("\n".join(current))
             current = []
     blocks.append("\n".join(current))
-    return [b for b in blocks if library in b and not b.startswith(("HEAP", "LEAK", "ERROR"))]
+
+    def tag_read(b: str) -> bool:
+        return b.startswith(("Invalid read of size 4", "Invalid read of size 8")) and (
+            " is 0 bytes inside a block of size" in b and "free'd" in b
+        )
+
+    return [
+        b
+        for b in blocks
+        if library in b and not b.startswith(("HEAP", "LEAK", "ERROR")) and not tag_read(b)
+    ]
 
 
 @needs_cc
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
 def test_fuzz_under_valgrind(native_dir, tmp_path, monkeypatch):
-    """A short safe run (no calls on freed memory): no invalid read, write or free and no use of
-    uninitialised memory inside the FMU."""
+    """A short run: no invalid write or free, no use of uninitialised memory and no read of freed
+    memory beyond the tag inside the FMU (a freed instance or state is recognised, not used)."""
     monkeypatch.setenv("PYTHONMALLOC", "malloc")  # Python's allocations visible to valgrind
     vg = ("valgrind", "--errors-for-leak-kinds=none", "--num-callers=30")
-    done = fuzz(native_dir, tmp_path, ",".join(FMUS), 3, 300, "safe", prefix=vg, timeout=300)
-    assert done.stdout.count("calls=300") == 2
+    done = fuzz(native_dir, tmp_path, ",".join(FMUS), 2, 600, prefix=vg, timeout=300)
+    assert done.stdout.count("calls=600") == 2
     assert "ERROR SUMMARY" in done.stderr  # valgrind did run
     for name in FMUS:
         assert errors_in(done.stderr, name.replace(".fmu", ".so")) == []
@@ -380,4 +390,4 @@ def test_fuzz_under_valgrind(native_dir, tmp_path, monkeypatch):
 if __name__ == "__main__":
     with open(sys.argv[4], "w") as out:
         for path in sys.argv[1].split(","):  # several FMUs: one after the other
-            Fuzzer(path, int(sys.argv[2]), out, "safe" in sys.argv[5:]).run(int(sys.argv[3]))
+            Fuzzer(path, int(sys.argv[2]), out).run(int(sys.argv[3]))

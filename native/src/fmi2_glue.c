@@ -219,7 +219,7 @@ void fmi2FreeInstance(fmi2Component c)
     if (!instance_ok(inst, "fmi2FreeInstance")) {
         return; /* freeing twice (or a foreign pointer) would corrupt the host's heap */
     }
-    inst->magic = 0;
+    *(volatile unsigned *)&inst->magic = 0; /* volatile: a plain store before free() is dead */
     free(inst);
 }
 
@@ -676,7 +676,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
     if (!state_ok(inst, box, "fmi2FreeFMUstate")) {
         return fmi2Error; /* freeing it could corrupt the host's heap */
     }
-    box->magic = 0;
+    *(volatile unsigned *)&box->magic = 0; /* volatile: see fmi2FreeInstance */
     free(box);
     *state = NULL;
     return fmi2OK;

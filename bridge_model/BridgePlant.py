@@ -2,9 +2,9 @@
 
 Status: every failed step returns fmi2Discard with the cause logged (fmi2Error status) and printed
 to stderr, like every model here: a refused step (bad input, the robot's ERROR reply) and a broken
-link (timeout, robot gone, reply out of sequence). After a broken link every later step is refused
-too. (An exception out of do_step would make pythonfmu 0.7 return fmi2Fatal and leave the Python
-interpreter in a state that crashes the next FMU call: never raise there.)
+link (timeout, robot gone, reply out of sequence, session lost). After a broken link every later
+step is refused too. (An exception out of do_step would make pythonfmu 0.7 return fmi2Fatal and
+leave the Python interpreter in a state that crashes the next FMU call: never raise there.)
 """
 
 from pythonfmu import Fmi2Slave

@@ -5,15 +5,23 @@ takes its initial outputs from the reply; each do_step sends the torques (STEP, 
 1, 2, ...) and returns the outputs the robot reports after the step. UDP, protocol in
 bridge_model/protocol.py (docs/hil.md).
 
+Every message is signed with the session token (`robot_token_file`, or `robot_token`), and
+carries a session id the bridge draws at random for its INIT. A reply counts only if its MAC
+verifies, it echoes our session id, sequence number and time stamp, and it has the right kind and
+count of finite values; datagrams that fail the MAC are ignored (counted in the timeout message).
+
 Failures (all logged with the cause, the step is not taken):
 
 - no reply within `timeout_s` (a lost or late packet, a stalled robot): "timeout after X ms
   waiting for sequence N";
 - the robot process is gone (ICMP port unreachable on loopback): "robot process not reachable";
-- a reply with another sequence number: "reply had sequence M, expected N";
-- the robot refuses the step (ERROR message): "robot refused step N: <its message>".
+- a reply with another sequence number, or that does not echo the request: "reply had sequence
+  M, expected N";
+- the robot no longer has our session (it restarted, or another bridge opened a session) or says
+  we are out of sequence: "the robot lost this session";
+- the robot refuses the step (ERROR message): "robot refused STEP N: <its message>".
 
-Every failure makes doStep return fmi2Discard (see BridgePlant.py). The first three also break
+Every failure makes doStep return fmi2Discard (see BridgePlant.py). All but the last also break
 the link: the bridge refuses every later step (the robot may or may not have taken the lost step,
 so the lock-step pairing is gone). At initialization the bridge
 resends INIT every 0.1 s until `init_timeout_s` (the robot may still be starting).
@@ -24,6 +32,7 @@ Standard library only (it runs inside the FMU, which bundles plant_model for the
 from __future__ import annotations
 
 import math
+import secrets
 import socket
 import time
 from dataclasses import dataclass, field
@@ -48,6 +57,14 @@ class BridgeSetup:
     robot_port: int = _p(50400, "", "Robot process UDP port", 1)
     timeout_s: float = _p(0.05, "s", "Per-step timeout waiting for the robot's reply", 0.0)
     init_timeout_s: float = _p(2.0, "s", "Time the robot has to answer the first INIT", 0.0)
+    robot_token_file: str = field(
+        default="",
+        metadata={"description": "File with the session token shared with the robot (mode 600)"},
+    )
+    robot_token: str = field(
+        default="",
+        metadata={"description": "The session token itself (secret; instead of the file)"},
+    )
 
 
 def plant_variables() -> list[Variable]:
@@ -57,6 +74,22 @@ def plant_variables() -> list[Variable]:
 
 PLANT_PARAMETERS = [v for v in plant_variables() if v.causality == "parameter"]
 PLANT_OUTPUTS = [v.name for v in plant_variables() if v.causality == "output"]
+
+
+def _token_key(setup: BridgeSetup) -> bytes:
+    """The MAC key from robot_token_file or robot_token (exactly one of them); ModelError."""
+    try:
+        if setup.robot_token_file and setup.robot_token:
+            raise ValueError("set robot_token_file or robot_token, not both")
+        if setup.robot_token_file:
+            return protocol.read_token_file(setup.robot_token_file)
+        if setup.robot_token:
+            return protocol.token_key(setup.robot_token, "robot_token")
+    except ValueError as exc:
+        raise ModelError(str(exc)) from None
+    raise ModelError(
+        "no session token: set robot_token_file to the robot's token file (or robot_token)"
+    )
 
 
 class LinkError(ModelError):
@@ -90,6 +123,9 @@ class BridgeModel(FmuModel):
         except (TypeError, ValueError) as exc:
             raise ModelError(str(exc)) from None
         self.where = f"{self.setup.robot_host}:{self.setup.robot_port}"
+        self.key = _token_key(self.setup)
+        self.session = secrets.randbits(64) | 1  # never 0
+        self.rejected = 0  # datagrams that failed the MAC or the checks
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.connect((self.setup.robot_host, self.setup.robot_port))
@@ -114,7 +150,8 @@ class BridgeModel(FmuModel):
     def _request(self, kind: int, t: float, h: float, values, timeout: float, resend: bool):
         """Send one request (seq = self.seq) and return its reply; LinkError on failure."""
         seq = self.seq
-        data = protocol.pack(kind, seq, t, h, values)
+        stamp = protocol.now_ns()
+        data = protocol.pack(self.key, kind, seq, self.session, t, h, values, stamp_ns=stamp)
         start = time.perf_counter()
         deadline = start + timeout
         refused = False
@@ -130,6 +167,10 @@ class BridgeModel(FmuModel):
                     else f"timeout after {1e3 * timeout:g} ms waiting for the reply to {what}"
                     f" sequence {seq} from {self.where}"
                 )
+                if self.rejected:
+                    cause += f" ({self.rejected} datagrams that failed the checks were ignored)"
+                if kind == protocol.INIT and not refused:
+                    cause += " (a robot with another session token drops every message)"
                 raise LinkError(cause)
             wait = deadline - now
             if resend:
@@ -154,21 +195,36 @@ class BridgeModel(FmuModel):
                 next_send = time.perf_counter()
                 continue
             try:
-                msg = protocol.Message(raw)
+                msg = protocol.Message(raw, self.key)
             except protocol.ProtocolError:
-                continue  # not ours: dropped
+                self.rejected += 1
+                continue  # not signed with our token, or not this protocol: ignored
+            if msg.session != self.session:
+                self.rejected += 1
+                continue  # not a reply to this session
             if msg.seq <= self.answered:
                 continue  # a duplicate reply to a resent request
-            if msg.seq != seq:
-                raise LinkError(f"reply had sequence {msg.seq}, expected {seq} (from {self.where})")
+            if msg.seq != seq or msg.echo_ns != stamp:
+                stale = ", but not our request's time stamp" if msg.seq == seq else ""
+                raise LinkError(
+                    f"reply had sequence {msg.seq}, expected {seq}{stale} (from {self.where})"
+                )
             if msg.kind == protocol.ERROR:
                 self.answered = seq
-                raise ModelError(f"robot refused {protocol.TYPE_NAMES[kind]} {seq}: {msg.text}")
+                text = f"robot refused {protocol.TYPE_NAMES[kind]} {seq}: {msg.text}"
+                if msg.code in (protocol.NO_SESSION, protocol.SEQUENCE):
+                    raise LinkError(
+                        f"the robot at {self.where} lost this session (it restarted, or another"
+                        f" bridge opened a session there): {text}"
+                    )
+                raise ModelError(text)
             if msg.kind != kind + 1 or len(msg.values) != len(PLANT_OUTPUTS):
                 raise LinkError(
                     f"reply to sequence {seq} is a {msg.name} with {len(msg.values)} values,"
                     f" expected a {protocol.TYPE_NAMES[kind + 1]} with {len(PLANT_OUTPUTS)}"
                 )
+            if not msg.finite():
+                raise LinkError(f"reply to sequence {seq} has a non-finite value")
             self.answered = seq
             self.rtt = time.perf_counter() - start
             return msg

@@ -31,7 +31,7 @@ from typing import Any
 
 from impedance_cosim.arm import Arm, ArmParams, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import Variable, parameters_of, vector
+from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
 from impedance_cosim.linalg3 import Vec3, matTvec, matvec, solve
 
 TWO_PI = 2.0 * math.pi
@@ -267,6 +267,9 @@ class ControllerModel(FmuModel):
         " trajectory of section 5: joint angles and wrist force/torque in; joint torques out,"
         " sampled and held"
     )
+    # The native flavour also offers Model Exchange: no continuous states, a time event at every
+    # sample instant (native/controller/model.c, model_me_event_update).
+    MODEL_EXCHANGE = ModelExchange(states=())
 
     @classmethod
     def variables(cls) -> list[Variable]:

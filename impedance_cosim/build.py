@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import impedance_cosim
+from impedance_cosim import toolchains
 from impedance_cosim.fmi.variables import model_description
 
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
@@ -124,28 +125,21 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
             for name in ["modelDescription.xml", *members]:
                 info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
                 if name != "modelDescription.xml":
-                    info.external_attr = zin.getinfo(name).external_attr
                     zout.writestr(info, zin.read(name))
                 else:
                     zout.writestr(info, xml(guid))
+            _add_documentation(zout, xml(guid), "pythonfmu")
         tmp_target.replace(target)
 
 
 NATIVE = REPO / "native"
 NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
-                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h")  # fmt: skip
+                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h",
+                 "fmi2_me.c", "instance.h", "model_me.h")  # fmt: skip
 NATIVE_MODEL = ("config.h", "model.h", "model.c")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-CFLAGS = [
-    "-std=c99",
-    "-O2",
-    "-fPIC",
-    "-ffp-contract=off",
-    "-fvisibility=hidden",
-    "-Wall",
-    "-Wextra",
-]
 
 
 def _native_sources(spec: FmuSpec) -> dict[str, bytes]:
@@ -167,18 +161,18 @@ def _native_sources(spec: FmuSpec) -> dict[str, bytes]:
 
 
 def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> Path:
-    """Build the native (C99) flavour of an FMU with the machine's C compiler: the same variables
-    as the Python FMU, a binaries/linux64 library and its sources/ (with buildDescription.xml) so
-    tools can rebuild it for another platform."""
+    """Build the native (C99) flavour of an FMU: the same variables as the Python FMU, a library
+    per platform with a compiler here (binaries/linux64, win64, aarch64-linux: see toolchains.py)
+    and its sources/ (with buildDescription.xml) so tools can build it for another platform."""
     import platform
-    import subprocess
 
     cls = spec.load_model_class()
     sources = _native_sources(spec)
     c_files = sorted(n for n in sources if n.endswith(".c"))
 
     def xml(guid: str) -> bytes:
-        return _model_description(cls, guid, "native C99", source_files=c_files)
+        me = getattr(cls, "MODEL_EXCHANGE", None)  # Model Exchange: native flavour only
+        return _model_description(cls, guid, "native C99", source_files=c_files, model_exchange=me)
 
     digest = hashlib.sha256(xml(""))
     for name in sorted(sources):
@@ -194,24 +188,17 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
         for name, content in sources.items():
             (src / name).write_bytes(content)
         if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
-            raise RuntimeError("the native build targets linux64 (x86_64) only")
-        lib = Path(tmp) / f"{cls.MODEL_NAME}.so"
-        cc = os.environ.get("CC", "gcc")
-        cmd = [cc, *CFLAGS, "-shared", f"-I{src}", *(str(src / f) for f in c_files), "-lm",
-               "-o", str(lib)]  # fmt: skip
-        try:
-            done = subprocess.run(cmd, capture_output=True, text=True)
-        except FileNotFoundError:
-            raise RuntimeError(f"C compiler {cc!r} not found (set CC)") from None
-        if done.returncode != 0:
-            raise RuntimeError(f"compiling {cls.MODEL_NAME} failed:\n{done.stderr}")
+            raise RuntimeError("the native build runs on linux64 (x86_64) only")
+        binaries = toolchains.build_binaries(src, cls.MODEL_NAME, c_files)
         target = out_dir / f"{cls.MODEL_NAME}.fmu"
         tmp_target = target.with_suffix(".fmu.tmp")
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr(_info("modelDescription.xml"), xml(guid))
-            z.writestr(_info(f"binaries/linux64/{cls.MODEL_NAME}.so", 0o755), lib.read_bytes())
+            for name in sorted(binaries):
+                z.writestr(_info(name, 0o755), binaries[name])
             for name in sorted(sources):
                 z.writestr(_info(f"sources/{name}"), sources[name])
+            _add_documentation(z, xml(guid), "native C99")
         tmp_target.replace(target)
     return target
 
@@ -221,6 +208,15 @@ def _info(name: str, mode: int = 0o644) -> zipfile.ZipInfo:
     info.compress_type = zipfile.ZIP_DEFLATED
     info.external_attr = mode << 16
     return info
+
+
+def _add_documentation(z: zipfile.ZipFile, model_description: bytes, flavour: str) -> None:
+    """Write documentation/ (index.html, the licence) and model.png into an FMU being written,
+    generated from its modelDescription and the members written so far (call it last)."""
+    from impedance_cosim.documentation import documentation_members
+
+    for name, data in documentation_members(model_description, z.namelist(), flavour).items():
+        z.writestr(_info(name), data)
 
 
 def _build_description(model_identifier: str, c_files: list[str]) -> bytes:
@@ -248,14 +244,15 @@ def build_ssp(
     target = out_dir / f"{name}.ssp"
     tmp_target = target.with_suffix(".ssp.tmp")
     with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
-        z.write(source / "SystemStructure.ssd", "SystemStructure.ssd")
+        # writestr with fixed dates and modes (z.write would take the files' mtimes)
+        z.writestr(_info("SystemStructure.ssd"), (source / "SystemStructure.ssd").read_bytes())
         for ssv in sorted(source.glob("*.ssv")):
-            z.write(ssv, f"resources/{ssv.name}")
+            z.writestr(_info(f"resources/{ssv.name}"), ssv.read_bytes())
         for comp in COMPONENTS:
             fmu = Path(fmu_dir or out_dir) / comp.fmu
             if not fmu.is_file():
                 raise FileNotFoundError(f"{fmu} is missing: build the FMUs first")
-            z.write(fmu, comp.source)
+            z.writestr(_info(comp.source), fmu.read_bytes())
     try:
         read_ssd(str(tmp_target), validate=True)
     except Exception as exc:
@@ -265,7 +262,9 @@ def build_ssp(
     return target
 
 
-def _model_description(cls, guid: str, flavour: str, source_files=None) -> bytes:
+def _model_description(
+    cls, guid: str, flavour: str, source_files=None, model_exchange=None
+) -> bytes:
     """modelDescription.xml of a model class, the same for both flavours but the tool name and
     the source file list."""
     return model_description(
@@ -277,6 +276,7 @@ def _model_description(cls, guid: str, flavour: str, source_files=None) -> bytes
         generation_tool=f"impedance_cosim {impedance_cosim.__version__} ({flavour})",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         source_files=source_files,
+        model_exchange=model_exchange,
     )
 
 

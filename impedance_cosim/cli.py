@@ -153,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", action="append", choices=["plant", "controller", "bridge"],
                    help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
     p.set_defaults(func=_cmd_build)
+    from impedance_cosim import dist
+
+    dist.add_parser(sub)
 
     p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures")
     add_run_options(p)

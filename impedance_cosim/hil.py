@@ -5,32 +5,32 @@ that stands in for the hardware behind the bridge plant FMU (bridge_model/, docs
   connector must exist with the same causality, type and unit; each parameter the active
   parameter set (and the --set overrides) give the component must exist as a parameter (with
   the same type, and unit when both have one).
-- `RobotServer` runs plant_model.model.PlantModel behind the bridge protocol
-  (bridge_model/protocol.py) on UDP: in lock-step mode it steps exactly as the bridge asks (the
-  same calls as the in-process plant: bit-identical results); in real-time mode it integrates
-  against the wall clock in fixed ticks with the last torque held, and answers each request with
-  its latest outputs. Faults can be injected for tests (`--fault`).
+- The robot process itself (`RobotServer`, `start_robot`) is in impedance_cosim/robot.py; `robot`
+  here checks its options and gets the session token (file or environment).
 - CLI: `impedance-cosim swap` and `impedance-cosim robot` (add_parsers).
 """
 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import os
-import select
-import socket
-import subprocess
 import sys
-import time
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bridge_model import protocol
-
-LISTENING = "robot: listening on"
-
+from impedance_cosim.robot import (
+    LISTENING,
+    MAX_STEP_RANGE,
+    TICK_RANGE,
+    Fault,
+    RobotServer,
+    check_range,
+    start_robot,
+    stop_robot,
+)
 
 # --- swap checks --------------------------------------------------------------------------------
 
@@ -86,232 +86,78 @@ def replacement_problems(
     return problems
 
 
-# --- the robot process --------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Fault:
-    """An injected fault at the STEP with sequence `seq`: drop (never answer), late (answer after
-    `arg` seconds), seq (answer with the sequence number + 1000), exit (the process exits at
-    once, without answering)."""
-
-    kind: str
-    seq: int
-    arg: float = 0.0
-
-    @classmethod
-    def parse(cls, text: str) -> Fault:
-        kind, _, rest = text.partition("@")
-        seq, _, arg = rest.partition(":")
-        if kind not in ("drop", "late", "seq", "exit") or not seq.isdigit():
-            raise ValueError(f"--fault expects drop@N, late@N:SECONDS, seq@N or exit@N ({text!r})")
-        return cls(kind, int(seq), float(arg or 0.0))
-
-
-class RobotServer:
-    """The plant behind the bridge protocol (see module docstring)."""
-
-    def __init__(
-        self,
-        host: str = "127.0.0.1",
-        port: int = 0,
-        realtime: bool = False,
-        overrides: Mapping[str, Any] | None = None,
-        faults: list[Fault] | None = None,
-        tick: float = 0.001,
-        log=None,
-    ) -> None:
-        from plant_model.model import PlantModel
-
-        self.model_class = PlantModel
-        self.parameters = [v for v in PlantModel.variables() if v.causality == "parameter"]
-        names = {v.name: v for v in self.parameters}
-        self.overrides = {}
-        for key, value in (overrides or {}).items():
-            comp, _, var = key.partition(".")
-            if comp != "plant" or var not in names:
-                raise ValueError(f"the robot has no parameter {key!r} (write plant.<parameter>)")
-            self.overrides[var] = _convert(names[var].type, value, key)
-        self.realtime = realtime
-        self.faults = {f.seq: f for f in faults or []}
-        self.tick = tick
-        self.log = log or (lambda text: print(f"robot: {text}", file=sys.stderr, flush=True))
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind((host, port))
-        self.address = self.sock.getsockname()
-        self.plant = None
-        self.cache: dict[Any, tuple[int, bytes]] = {}  # client -> (seq, reply) of its last request
-        self.tau = (0.0, 0.0, 0.0)
-        self.dropped = 0
-        self.steps = 0
-
-    @property
-    def mode(self) -> str:
-        return "real time" if self.realtime else "lock-step"
-
-    def close(self) -> None:
-        self.sock.close()
-
-    def serve(self, duration: float | None = None) -> None:
-        """Answer requests (for `duration` seconds, default forever)."""
-        end = None if duration is None else time.perf_counter() + duration
-        while end is None or time.perf_counter() < end:
-            timeout = 0.2 if end is None else max(0.0, min(0.2, end - time.perf_counter()))
-            if self.realtime and self.plant is not None:
-                self._advance()
-                timeout = min(timeout, max(0.0, self._next_tick() - time.perf_counter()))
-            ready, _, _ = select.select([self.sock], [], [], timeout)
-            if ready:
-                raw, client = self.sock.recvfrom(65536)
-                self._handle(raw, client)
-
-    def _handle(self, raw: bytes, client) -> None:
-        try:
-            msg = protocol.Message(raw)
-        except protocol.ProtocolError as exc:
-            self.dropped += 1
-            self.log(f"dropped a datagram from {client}: {exc}")
-            return
-        if msg.kind not in (protocol.INIT, protocol.STEP):
-            self.dropped += 1
-            return
-        last = self.cache.get(client)
-        if last and last[0] == msg.seq:
-            self.sock.sendto(last[1], client)  # a resent request: the same answer, no new step
-            return
-        seq = msg.seq
-        fault = self.faults.get(seq) if msg.kind == protocol.STEP else None
-        if fault and fault.kind == "exit":
-            self.log(f"fault injected: exiting at STEP {seq}")
-            os._exit(3)
-        if fault and fault.kind == "drop":
-            self.log(f"fault injected: no reply to STEP {seq}")
-            self.cache[client] = (seq, b"")
-            return
-        reply = self._init(msg) if msg.kind == protocol.INIT else self._step(msg)
-        if fault and fault.kind == "late":
-            self.log(f"fault injected: reply to STEP {seq} {fault.arg:g} s late")
-            time.sleep(fault.arg)
-        if fault and fault.kind == "seq":
-            self.log(f"fault injected: reply to STEP {seq} with sequence {seq + 1000}")
-            reply = reply[:8] + (seq + 1000).to_bytes(4, "little") + reply[12:]
-        self.cache[client] = (seq, reply)
-        self.sock.sendto(reply, client)
-
-    def _init(self, msg: protocol.Message) -> bytes:
-        from impedance_cosim.fmi.model import ModelError
-
-        if len(msg.values) != len(self.parameters):
-            n, want = len(msg.values), len(self.parameters)
-            text = f"INIT carries {n} parameters, the plant has {want}"
-            return protocol.pack(protocol.ERROR, msg.seq, msg.t, 0.0, text=text)
-        params = {
-            v.name: _convert(v.type, x, v.name)
-            for v, x in zip(self.parameters, msg.values, strict=True)
-        }
-        params.update(self.overrides)
-        try:
-            self.plant = self.model_class(params, msg.t, None)
-        except ModelError as exc:
-            self.plant = None
-            return protocol.pack(protocol.ERROR, msg.seq, msg.t, 0.0, text=str(exc))
-        self.tau = (0.0, 0.0, 0.0)
-        self.t_sim0, self.k = msg.t, 0
-        self.t_wall0 = time.perf_counter()
-        self.steps = 0
-        self.log(f"INIT ({self.mode}) at t={msg.t:g}")
-        return self._reply(protocol.INIT_REPLY, msg)
-
-    def _step(self, msg: protocol.Message) -> bytes:
-        from impedance_cosim.fmi.model import ModelError
-
-        if self.plant is None:
-            text = "no plant: INIT first"
-            return protocol.pack(protocol.ERROR, msg.seq, msg.t, msg.h, text=text)
-        try:
-            if self.realtime:
-                self._advance()
-                self.tau = tuple(msg.values)
-            else:
-                self.plant.do_step(msg.t, msg.h, tuple(msg.values))
-        except ModelError as exc:
-            return protocol.pack(protocol.ERROR, msg.seq, msg.t, msg.h, text=str(exc))
-        self.steps += 1
-        return self._reply(protocol.STEP_REPLY, msg)
-
-    def _reply(self, kind: int, msg: protocol.Message) -> bytes:
-        return protocol.pack(kind, msg.seq, self.plant.t, msg.h, self.plant.outputs(),
-                             echo_ns=msg.stamp_ns)  # fmt: skip
-
-    # real time: the plant advances in ticks of `tick` seconds of wall-clock time
-    def _next_tick(self) -> float:
-        return self.t_wall0 + (self.k + 1) * self.tick
-
-    def _advance(self) -> None:
-        from impedance_cosim.fmi.model import ModelError
-
-        while time.perf_counter() >= self._next_tick():
-            try:
-                self.plant.do_step(self.t_sim0 + self.k * self.tick, self.tick, self.tau)
-            except ModelError as exc:
-                self.log(f"the plant failed at t={self.plant.t:g}: {exc}; stopped")
-                self.plant = None
-                return
-            self.k += 1
-
-
-def _convert(kind: str, value: Any, name: str) -> Any:
-    from impedance_cosim.fmu import fmi_value
-
-    if kind in ("Integer", "Boolean") and isinstance(value, float):
-        value = int(value)
-    return fmi_value(kind, value, name)
-
-
-def start_robot(
-    realtime: bool = False, extra: list[str] | None = None, timeout: float = 20.0
-) -> tuple[subprocess.Popen, int]:
-    """Start `impedance-cosim robot` on a free loopback port as a child process; returns it and
-    its port (read from its first line). The caller must kill it."""
-    cmd = [sys.executable, "-m", "impedance_cosim.cli", "robot", "--port", "0"]
-    cmd += ["--realtime" if realtime else "--lockstep", *(extra or [])]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], timeout)
-    line = proc.stdout.readline() if ready else ""
-    if LISTENING not in line:
-        proc.kill()
-        proc.wait()
-        raise RuntimeError(f"the robot process did not start (got {line!r})")
-    return proc, int(line.split()[3].rsplit(":", 1)[1])
-
-
-def stop_robot(proc: subprocess.Popen) -> None:
-    """Kill a robot process started by start_robot and reap it."""
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=10)
-    if proc.stdout:
-        proc.stdout.close()
-
-
 # --- CLI ----------------------------------------------------------------------------------------
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
     from impedance_cosim.cli import parse_overrides
 
-    faults = [Fault.parse(f) for f in args.fault or []]
-    server = RobotServer(args.host, args.port, args.realtime, parse_overrides(args.set or []),
-                         faults, tick=args.tick)  # fmt: skip
+    realtime, tick, max_step, duration, faults, key = _robot_options(args)
+    server = RobotServer(key, args.host, args.port, realtime, parse_overrides(args.set or []),
+                         faults, tick=tick, max_step=max_step)  # fmt: skip
     host, port = server.address
     print(f"{LISTENING} {host}:{port} ({server.mode})", flush=True)
+    if not ipaddress.ip_address(host).is_loopback:
+        print(f"robot: {host} is not a loopback address: every machine that can reach port {port}"
+              " can send datagrams here (the token keeps them out; the traffic is not encrypted:"
+              " docs/hil.md, Trust model)", file=sys.stderr, flush=True)  # fmt: skip
     try:
-        server.serve(args.duration)
+        server.serve(duration)
     except KeyboardInterrupt:
         pass
     finally:
         server.close()
     return 0
+
+
+def _robot_options(args: argparse.Namespace):
+    """The robot's options, each checked (ValueError naming the option otherwise: main prints it
+    as one line, exit 2; not CliError, which is another class when cli runs as __main__, as in
+    the child start_robot starts); the session token's key from --token-file (created if
+    missing) or the environment."""
+
+    def number(name: str, text: str | None, low: float, high: float) -> float | None:
+        if text is None:
+            return None
+        try:
+            return check_range(name, float(text), low, high)
+        except ValueError:
+            raise ValueError(
+                f"{name} must be a number from {low:g} to {high:g} (got {text!r})"
+            ) from None
+
+    tick = number("--tick", args.tick, *TICK_RANGE)
+    max_step = number("--max-step", args.max_step, *MAX_STEP_RANGE)
+    duration = number("--duration", args.duration, 1e-3, 1e7)
+    try:
+        port = int(args.port)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise ValueError(f"--port must be an integer from 0 to 65535 (got {args.port!r})")
+    args.port = port
+    faults = [Fault.parse(f) for f in args.fault or []]
+    return args.realtime, tick, max_step, duration, faults, _session_key(args.token_file)
+
+
+def _session_key(token_file: str | None) -> bytes:
+    """The session token's MAC key: from the environment, or from token_file (created with a new
+    token if it does not exist); ValueError otherwise."""
+    env = os.environ.get(protocol.TOKEN_ENV)
+    if token_file and env:
+        raise ValueError(
+            f"give the session token by --token-file or {protocol.TOKEN_ENV}, not both"
+        )
+    if env:
+        return protocol.token_key(env, protocol.TOKEN_ENV)
+    if not token_file:
+        raise ValueError(f"no session token: give --token-file PATH (a new token is written there "
+                         f"if it does not exist) or set {protocol.TOKEN_ENV}")  # fmt: skip
+    if Path(token_file).expanduser().exists():
+        return protocol.read_token_file(token_file)
+    key = protocol.write_token_file(token_file)
+    print(f"robot: new session token written to {token_file} (mode 600)", file=sys.stderr)
+    return key
 
 
 def _cmd_swap(args: argparse.Namespace) -> int:
@@ -344,8 +190,10 @@ def _cmd_swap(args: argparse.Namespace) -> int:
         if len(bridged) != 1:
             raise cli.CliError("--robot needs exactly one replacement that is a bridge FMU")
         extra = [f"--set=plant.{s.split('.', 1)[1]}" for s in args.robot_set or []]
-        robot, port = start_robot(args.robot == "realtime", extra)
-        args.set = [*(args.set or []), f"{bridged[0]}.robot_port={port}"]
+        token = protocol.new_token()  # to the robot in its environment, to the bridge in-process
+        robot, port = start_robot(token, args.robot == "realtime", extra)
+        args.set = [*(args.set or []), f"{bridged[0]}.robot_port={port}",
+                    f"{bridged[0]}.robot_token={token}"]  # fmt: skip
         print(f"robot process ({args.robot}) on port {port}", file=sys.stderr)
     try:
         return cli._cmd_run(args)
@@ -389,17 +237,23 @@ def add_parsers(sub) -> None:
         f"'{LISTENING} HOST:PORT (mode)' first. Runs until killed (or --duration).",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default loopback)")
-    p.add_argument("--port", type=int, default=50400, help="UDP port (0: a free one)")
+    p.add_argument("--port", default="50400", help="UDP port (0: a free one)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="realtime", action="store_false", default=False,
                       help="advance only on request (default; deterministic)")  # fmt: skip
     mode.add_argument("--realtime", dest="realtime", action="store_true",
                       help="integrate continuously against the wall clock")  # fmt: skip
-    p.add_argument("--tick", type=float, default=0.001,
-                   help="real time: integration tick [s] (default 0.001)")  # fmt: skip
+    p.add_argument("--tick", default="0.001",
+                   help="real time: integration tick [s] (default 0.001, 1e-5 to 0.1)")  # fmt: skip
+    p.add_argument("--max-step", default="1.0",
+                   help="longest STEP the robot takes [s] (default 1, at most 10)")  # fmt: skip
+    p.add_argument("--token-file", default=None, metavar="PATH",
+                   help="session token file (mode 600; created with a new token if missing); or "
+                        f"set {protocol.TOKEN_ENV}")  # fmt: skip
     p.add_argument("--set", action="append", metavar="plant.VARIABLE=VALUE",
                    help="override a plant parameter sent by INIT (repeatable)")  # fmt: skip
     p.add_argument("--fault", action="append", metavar="KIND@SEQ[:ARG]",
-                   help="fault at STEP SEQ: drop@N, late@N:SECONDS, seq@N, exit@N")  # fmt: skip
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+                   help="fault at STEP SEQ: drop@N, late@N:SECONDS, seq@N, exit@N, "
+                        "reset@N")  # fmt: skip
+    p.add_argument("--duration", default=None, help="stop after this many seconds")
     p.set_defaults(func=_cmd_robot)

@@ -426,7 +426,11 @@ class Master:
         # are read first, so the others start from real inputs rather than their start values.
         def independent(s: _Slot) -> bool:
             outs = s.fmu.description.outputs
-            return bool(outs) and all(u.dependencies == [] for u in outs)
+            # (an FMU with Model Exchange also lists its continuous states there: not inputs)
+            return bool(outs) and all(
+                u.dependencies is not None and all(d.causality != "input" for d in u.dependencies)
+                for u in outs
+            )
 
         for s in sorted(ordered, key=lambda s: not independent(s)):
             ready = [(j, k) for j, k in s.sources if ordered[j].values]

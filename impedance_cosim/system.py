@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from controller_model.model import ControllerModel
-from impedance_cosim.fmi.variables import UNITS, Variable
+from impedance_cosim import __version__
+from impedance_cosim.fmi.variables import AUTHOR, COPYRIGHT, UNITS, Variable
 from plant_model.model import PlantModel
 
 NS = {
@@ -25,6 +26,9 @@ NS = {
 for _prefix, _uri in NS.items():
     ET.register_namespace(_prefix, _uri)
 ANNOTATION_TYPE = "org.impedance-cosim.master"
+# SSP 1.0 top-level meta-data (ssc:ATopLevelMetaData) of the SSD and every SSV.
+META = {"author": AUTHOR, "fileversion": __version__, "copyright": COPYRIGHT,
+        "license": "BSD-2-Clause"}  # fmt: skip
 
 SYSTEM_NAME = "PaperScenario"
 STEP = 1 / 400
@@ -122,7 +126,7 @@ def ssd_xml() -> bytes:
     """SystemStructure.ssd of the paper's system."""
     root = ET.Element(
         _q("ssd", "SystemStructureDescription"),
-        {"version": "1.0", "name": "ImpedanceControlWithoutVelocityMeasurements"},
+        {"version": "1.0", "name": "ImpedanceControlWithoutVelocityMeasurements", **META},
     )
     system = ET.SubElement(
         root,
@@ -195,7 +199,7 @@ def ssv_xml(name: str) -> bytes:
     """The parameter set of a scenario."""
     root = ET.Element(
         _q("ssv", "ParameterSet"),
-        {"version": "1.0", "name": name, "description": SCENARIO_DESCRIPTIONS[name]},
+        {"version": "1.0", "name": name, "description": SCENARIO_DESCRIPTIONS[name], **META},
     )
     params = ET.SubElement(root, _q("ssv", "Parameters"))
     used_units: set[str] = set()

@@ -15,7 +15,7 @@ from typing import Any
 
 from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import Variable, parameters_of, vector
+from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
 from impedance_cosim.ode import IntegrationError, integrate
 from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
 
@@ -28,8 +28,18 @@ class PlantSetup:
     y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
     phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
     elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
-    q_quant: float = _p(0.0, "rad", "Joint encoder resolution (0: no quantization)", 0.0)
-    q_noise: float = _p(0.0, "rad", "Std. dev. of Gaussian joint-angle noise (0: none)", 0.0)
+    q_quant: float = _p(
+        0.0,
+        "rad",
+        "Joint encoder resolution (0: none; Model Exchange: ideal encoders, 0 only)",
+        0.0,
+    )
+    q_noise: float = _p(
+        0.0,
+        "rad",
+        "Std. dev. of Gaussian joint-angle noise (0: none; Model Exchange: ideal encoders, 0 only)",
+        0.0,
+    )
     noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
     rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
     atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)
@@ -60,6 +70,13 @@ class PlantModel(FmuModel):
         " wrist force/torque out, plus truth signals for analysis"
     )
     OUTPUT_DEPENDENCIES = ""  # outputs depend on the state only: no direct feedthrough
+    # The native flavour also offers Model Exchange (native/src/fmi2_me.c): these continuous
+    # states, their der() variables, and one event indicator (the contact's switching function).
+    # The tolerance a host's solver should use (the plant's own integrator runs at rtol 1e-9).
+    DEFAULT_EXPERIMENT = {**FmuModel.DEFAULT_EXPERIMENT, "tolerance": 1e-9}
+    MODEL_EXCHANGE = ModelExchange(
+        states=("q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3"), event_indicators=1
+    )
 
     @classmethod
     def variables(cls) -> list[Variable]:
@@ -121,14 +138,16 @@ class PlantModel(FmuModel):
         xd = -(s1 + s12 + s123) * qd[0] - (s12 + s123) * qd[1] - s123 * qd[2]
         return x, xd
 
-    def _rhs(self, tau, in_contact: bool, budget: list[int]):
+    def _rhs(self, tau, in_contact: bool, budget: list[int] | None = None):
         """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1).
-        budget[0] counts the evaluations left in this communication step (max_rhs_evaluations)."""
+        budget[0], when given, counts the evaluations left in this communication step
+        (max_rhs_evaluations)."""
         arm, wall = self.arm, self.wall
 
         def f(y):
-            budget[0] -= 1
-            if budget[0] < 0:
+            if budget is not None:
+                budget[0] -= 1
+            if budget is not None and budget[0] < 0:
                 raise IntegrationError(
                     f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
                     " one communication step (parameter max_rhs_evaluations): take a smaller step"

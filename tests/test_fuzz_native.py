@@ -6,8 +6,9 @@ be a comma-separated list).
 The driver calls the raw fmi2* functions through ctypes: any instance/state order (terminate,
 reset, free, calls after free), every type with NaN, inf, huge, negative values and unknown value
 references, doStep with odd times and steps, get/set/serialize/deserialize of states including
-mutated serialized bytes. Only the two work-bound parameters are kept small when set (a fuzzer
-that sets max_rhs_evaluations to 2^31 would just measure how long a legal huge step takes)."""
+mutated serialized bytes, and the Model Exchange functions (on instances of either kind). Only
+the two work-bound parameters are kept small when set (a fuzzer that sets max_rhs_evaluations to
+2^31 would just measure how long a legal huge step takes)."""
 
 from __future__ import annotations
 
@@ -29,6 +30,10 @@ INTS = [0, 1, -1, 2, 7, 2**31 - 1, -(2**31), 1000, -1000]
 STRINGS = [b"observer", b"difference", b"measured", b"", b"x" * 63, b"x" * 64, b"x" * 500,
            "\u00e9".encode(), b"%s%n%x", b"\xff\xfe"]  # fmt: skip
 WORK_BOUNDS = ("max_rhs_evaluations", "max_samples_per_step")
+ME_FUNCTIONS = ["fmi2SetTime", "fmi2SetContinuousStates", "fmi2GetContinuousStates",
+                "fmi2GetDerivatives", "fmi2GetEventIndicators", "fmi2EnterEventMode",
+                "fmi2NewDiscreteStates", "fmi2EnterContinuousTimeMode",
+                "fmi2CompletedIntegratorStep", "fmi2GetNominalsOfContinuousStates"]  # fmt: skip
 
 
 class Fuzzer:
@@ -36,7 +41,7 @@ class Fuzzer:
 
     def __init__(self, path: str, seed: int, progress) -> None:
         from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+        from fmpy.fmi2 import FMU2Model, FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
         from fmpy.fmi2 import defaultCallbacks as default_callbacks  # noqa: N813
 
         self.rng = random.Random(seed)
@@ -53,7 +58,17 @@ class Fuzzer:
             modelIdentifier=md.coSimulation.modelIdentifier,
             instanceName="fuzz",
         )
-        self.raw = self.lib._functions
+        self.raw = dict(self.lib._functions)
+        self.me = md.modelExchange is not None
+        if self.me:  # the Model Exchange functions of the same library
+            self.raw.update(
+                FMU2Model(
+                    guid=md.guid,
+                    unzipDirectory=unzip,
+                    modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="fuzz",
+                )._functions
+            )
         self.ok: dict[str, int] = {}  # successful calls per function, to see what was reached
         self.f = {name: self._counted(name) for name in self.raw}
         self.messages = 0
@@ -118,8 +133,9 @@ class Fuzzer:
 
     def instantiate(self) -> None:
         logging_on = self.rng.random() < 0.5
+        kind = 0 if self.me and self.rng.random() < 0.3 else 1  # Model Exchange / co-simulation
         c = self.f["fmi2Instantiate"](
-            b"fuzz", 1, self.guid, self.resources, ctypes.byref(self.cb), 0, logging_on
+            b"fuzz", kind, self.guid, self.resources, ctypes.byref(self.cb), 0, logging_on
         )
         if c:
             self.live.append(c)
@@ -223,6 +239,32 @@ class Fuzzer:
         real = ctypes.c_double()
         self.f["fmi2GetRealStatus"](c, 2, ctypes.byref(real))  # fmi2LastSuccessfulTime
 
+    def me_op(self) -> None:
+        """A Model Exchange call (on any instance: co-simulation ones must refuse it)."""
+        from fmpy.fmi2 import fmi2EventInfo
+
+        c = self.component()
+        if c is None or not self.me:
+            return
+        r = self.rng
+        name = r.choice(ME_FUNCTIONS)
+        n = r.choice([0, 1, 6, 6, 6, 7, 100])
+        if name == "fmi2SetTime":
+            self.f[name](c, self.real() if r.random() < 0.3 else r.uniform(0.0, 1.0))
+        elif name == "fmi2SetContinuousStates":
+            values = [r.gauss(0.0, 1.0) if r.random() < 0.8 else self.real() for _ in range(n)]
+            self.f[name](c, (ctypes.c_double * max(n, 1))(*values), n)
+        elif name in ("fmi2EnterEventMode", "fmi2EnterContinuousTimeMode"):
+            self.f[name](c)
+        elif name == "fmi2NewDiscreteStates":
+            info = fmi2EventInfo()
+            self.f[name](c, ctypes.byref(info))
+        elif name == "fmi2CompletedIntegratorStep":
+            enter, terminate = ctypes.c_int(), ctypes.c_int()
+            self.f[name](c, r.randint(0, 1), ctypes.byref(enter), ctypes.byref(terminate))
+        else:
+            self.f[name](c, (ctypes.c_double * max(n, 1))(), n)
+
     def state_op(self) -> None:
         c = self.component()
         if c is None:
@@ -289,8 +331,8 @@ class Fuzzer:
     def run(self, calls: int) -> None:
         r = self.rng
         ops = [(self.instantiate, 3), (self.free, 2), (self.initialize, 5), (self.lifecycle, 6),
-               (self.set_values, 20), (self.get_values, 10), (self.do_step, 35),
-               (self.state_op, 15)]  # fmt: skip
+               (self.set_values, 20), (self.get_values, 10), (self.do_step, 30),
+               (self.state_op, 15), (self.me_op, 10)]  # fmt: skip
         funcs, weights = zip(*ops)
         for k in range(calls):
             op = r.choices(funcs, weights)[0]

@@ -20,9 +20,13 @@ import pytest
 from bridge_model import protocol
 from impedance_cosim import analysis
 from impedance_cosim.cli import main
-from impedance_cosim.hil import Fault, replacement_problems, start_robot, stop_robot
+from impedance_cosim.hil import replacement_problems
 from impedance_cosim.master import RT_COLUMNS, Master
+from impedance_cosim.robot import Fault, start_robot, stop_robot
 from impedance_cosim.ssp import read_ssp
+
+TOKEN = protocol.new_token()
+KEY = protocol.token_key(TOKEN)
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +45,7 @@ def robot(request):
     procs = []
 
     def start(*extra: str, realtime: bool = False) -> int:
-        proc, port = start_robot(realtime, list(extra), timeout=20.0)
+        proc, port = start_robot(TOKEN, realtime, list(extra), timeout=20.0)
         procs.append(proc)
         start.proc = proc
         return port
@@ -52,7 +56,7 @@ def robot(request):
 
 
 def bridged(system, bridge, port, stop, **kw):
-    overrides = {"plant.robot_port": port, **kw.pop("overrides", {})}
+    overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN, **kw.pop("overrides", {})}
     master = Master(system, stop_time=stop, fmu_files={"plant": bridge}, overrides=overrides, **kw)
     return master.run()
 
@@ -76,22 +80,52 @@ def test_bridge_has_the_plants_interface(fmu_dir):
 
 
 def test_protocol_round_trip_and_rejections():
-    data = protocol.pack(protocol.STEP, 7, 0.25, 0.0025, (1.0, -2.5, 3e-300), echo_ns=5)
-    assert len(data) == protocol.HEADER.size + 3 * 8
-    msg = protocol.Message(data)
-    assert (msg.kind, msg.seq, msg.t, msg.h, msg.values, msg.echo_ns) == (
-        protocol.STEP, 7, 0.25, 0.0025, (1.0, -2.5, 3e-300), 5,
+    data = protocol.pack(KEY, protocol.STEP, 7, 2**63 + 5, 0.25, 0.0025, (1.0, -2.5, 3e-300),
+                         echo_ns=5)  # fmt: skip
+    assert len(data) == protocol.HEADER.size + 3 * 8 + protocol.MAC_SIZE
+    msg = protocol.Message(data, KEY)
+    assert (msg.kind, msg.seq, msg.session, msg.t, msg.h, msg.values, msg.echo_ns) == (
+        protocol.STEP, 7, 2**63 + 5, 0.25, 0.0025, (1.0, -2.5, 3e-300), 5,
     )  # fmt: skip
-    text = protocol.Message(protocol.pack(protocol.ERROR, 3, 0, 0, text="no plant")).text
-    assert text == "no plant"
+    error = protocol.pack(KEY, protocol.ERROR, 3, 1, 0, 0, text="no plant", code=protocol.REFUSED)
+    assert (protocol.Message(error, KEY).text, protocol.Message(error, KEY).code) == (
+        "no plant", protocol.REFUSED,
+    )  # fmt: skip
+    other = protocol.token_key(protocol.new_token())
+
+    def resign(body: bytes) -> bytes:  # a validly signed datagram with a doctored header
+        return body + protocol._mac(KEY, body)
+
+    body = data[: -protocol.MAC_SIZE]
     for bad, why in [
-        (data[:40], "shorter than the header"),
-        (b"XXXX" + data[4:], "bad magic"),
-        (data[:4] + (2).to_bytes(2, "little") + data[6:], "protocol version 2"),
-        (data[:-8], "with count 3"),
+        (data[:40], "shorter than header and MAC"),
+        (data + bytes(protocol.MAX_DATAGRAM), "longer than"),
+        (data[:-1] + bytes([data[-1] ^ 1]), "MAC does not verify"),
+        (data[:20] + bytes([data[20] ^ 1]) + data[21:], "MAC does not verify"),
+        (protocol.pack(other, protocol.STEP, 7, 1, 0.25, 0.0025, (1.0,)), "MAC does not verify"),
+        (resign(b"XXXX" + body[4:]), "bad magic"),
+        (resign(body[:4] + (1).to_bytes(2, "little") + body[6:]), "protocol version 1"),
+        (resign(body[:-8]), "with count 3"),
     ]:
         with pytest.raises(protocol.ProtocolError, match=why):
-            protocol.Message(bad)
+            protocol.Message(bad, KEY)
+
+
+def test_token_files_must_be_private(tmp_path):
+    key = protocol.write_token_file(tmp_path / "token")
+    assert (tmp_path / "token").stat().st_mode & 0o777 == 0o600
+    assert protocol.read_token_file(tmp_path / "token") == key and len(key) == 64
+    with pytest.raises(ValueError, match="exists"):
+        protocol.write_token_file(tmp_path / "token")  # never overwritten
+    (tmp_path / "token").chmod(0o644)
+    with pytest.raises(ValueError, match="mode 644 lets others read it"):
+        protocol.read_token_file(tmp_path / "token")
+    (tmp_path / "short").write_text("abc")
+    (tmp_path / "short").chmod(0o600)
+    with pytest.raises(ValueError, match="32-256 printable ASCII"):
+        protocol.read_token_file(tmp_path / "short")
+    with pytest.raises(ValueError, match="No such file"):
+        protocol.read_token_file(tmp_path / "missing")
 
 
 # --- swap ----------------------------------------------------------------------------------------
@@ -239,7 +273,7 @@ def test_a_robot_that_never_starts_fails_the_initialization(ssp_path, bridge):
         "start = time.perf_counter()\n"
         f"r = Master(read_ssp({str(ssp_path)!r}), stop_time=1.0, fmu_files={{'plant': "
         f"{str(bridge)!r}}}, overrides={{'plant.robot_port': {port}, "
-        "'plant.init_timeout_s': 0.3}).run()\n"
+        f"'plant.robot_token': {TOKEN!r}, 'plant.init_timeout_s': 0.3}}).run()\n"
         "print(r.ok, len(r.data), round(time.perf_counter() - start, 2), r.error, flush=True)\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -100,12 +100,14 @@ class Slave:
         return self.f["fmi2DeSerializeFMUstate"](self.c, buf, len(blob), ctypes.byref(state)), state
 
 
-# Native FMU state layout (fmi2_glue.c): SerialHeader (48 bytes), then Snapshot = Data (r[N],
-# i[N], s[N][64], ModelState, start_time), phase, dirty, last_time. Offsets from the body's end.
+# Native FMU state layout (fmi2_glue.c, instance.h): SerialHeader (48 bytes), then Snapshot =
+# Data (r[N], i[N], s[N][64], ModelState, start_time), phase, dirty, last_time, me_time,
+# me_time_set, event_switches. Offsets from the body's end (checked on a valid state below).
 HEADER = 48
-PHASE, DIRTY, LAST_TIME, START_TIME = -16, -12, -8, -24
-PLANT_RNG_INDEX, PLANT_GAUSS_FLAG = -40, -36  # PyRandom's index, has_gauss_next (end of ModelState)
-CONTROLLER_STATE = -24 - 136  # ModelState of the controller: t, start_time, k_next, held, ...
+PHASE, DIRTY, LAST_TIME, START_TIME = -32, -28, -24, -40
+ME_TIME_SET, EVENT_SWITCHES = -8, -4
+PLANT_RNG_INDEX, PLANT_GAUSS_FLAG = -56, -52  # PyRandom's index, has_gauss_next (end of ModelState)
+CONTROLLER_STATE = -40 - 136  # ModelState of the controller: t, start_time, k_next, held, ...
 CONTROLLER_K_NEXT, CONTROLLER_SOURCE = CONTROLLER_STATE + 16, CONTROLLER_STATE + 128
 
 
@@ -133,6 +135,9 @@ def crafted_state(s: Slave, blob: bytes, name: str, field: str) -> bytes:
     at = HEADER + 12 * n + 64 * s.vr.get("velocity_source", 0)
     cases = {
         "phase": lambda: _poke(blob, PHASE, "<i", 77),
+        "phase_of_model_exchange": lambda: _poke(blob, PHASE, "<i", 3),  # S_EVENT_MODE
+        "me_time_set": lambda: _poke(blob, ME_TIME_SET, "<i", 7),
+        "event_switches": lambda: _poke(blob, EVENT_SWITCHES, "<i", -5),
         "dirty": lambda: _poke(blob, DIRTY, "<i", -3),
         "last_time": lambda: _poke(blob, LAST_TIME, "<d", math.inf),
         "start_time": lambda: _poke(blob, START_TIME, "<d", math.nan),
@@ -221,7 +226,7 @@ def case_nan_time(path: str) -> None:
 
 # impedance_cosim.fmi.slave's state framing, restated: importing it here would make the FMU use
 # this checkout's slave module instead of its own (one module cache per process)
-STATE_MAGIC, STATE_HEADER = b"IMPCPY1\n", struct.Struct(">8sQ32s")
+STATE_MAGIC, STATE_HEADER = b"IMPCPY2\n", struct.Struct(">8sQI")
 
 
 def case_python_garbage_state(path: str) -> None:
@@ -233,9 +238,9 @@ def case_python_garbage_state(path: str) -> None:
     assert status == OK and s.f["fmi2SetFMUstate"](s.c, state) == OK
 
     def framed(body: bytes) -> bytes:  # a valid header and checksum around a crafted body
-        import hashlib
+        import binascii
 
-        return STATE_HEADER.pack(STATE_MAGIC, len(body), hashlib.sha256(body).digest()) + body
+        return STATE_HEADER.pack(STATE_MAGIC, len(body), binascii.crc32(body)) + body
 
     body = blob[STATE_HEADER.size :]
     for label, bad in [
@@ -275,12 +280,12 @@ def run(case: str, *args: str, timeout: float = 60) -> subprocess.CompletedProce
 
 needs_cc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
-PLANT_FIELDS = ["phase", "dirty", "last_time", "start_time", "parameter_nan",
-                "parameter_below_min", "rng_index_huge", "rng_index_negative", "rng_flag",
-                "boolean", "input_inf"]  # fmt: skip
-CONTROLLER_FIELDS = ["phase", "dirty", "last_time", "start_time", "parameter_nan",
-                     "parameter_below_min", "k_next_negative", "source_enum",
-                     "string_unterminated", "max_samples_zero"]  # fmt: skip
+COMMON_FIELDS = ["phase", "phase_of_model_exchange", "me_time_set", "event_switches", "dirty",
+                 "last_time", "start_time", "parameter_nan", "parameter_below_min"]  # fmt: skip
+PLANT_FIELDS = [*COMMON_FIELDS, "rng_index_huge", "rng_index_negative", "rng_flag", "boolean",
+                "input_inf"]  # fmt: skip
+CONTROLLER_FIELDS = [*COMMON_FIELDS, "k_next_negative", "source_enum", "string_unterminated",
+                     "max_samples_zero"]  # fmt: skip
 
 
 @needs_cc

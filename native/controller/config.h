@@ -171,4 +171,8 @@ static const VarInfo VARS[N_VARS] = {
     {"e_phi", T_REAL, C_OUTPUT, 0.0, NULL, 0, 0.0},
 };
 
+#define MODEL_EXCHANGE 1
+#define N_STATES 0
+#define N_EVENT_INDICATORS 0
+
 #endif

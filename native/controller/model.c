@@ -17,6 +17,7 @@
 #include "arm_terms.h"
 #include "glue.h"
 #include "linalg3.h"
+#include "model_me.h"
 
 #define PI 3.141592653589793 /* math.pi */
 #define TWO_PI (2.0 * PI)
@@ -518,5 +519,75 @@ int model_check_state(const Data *d, char *msg)
             return fail(msg, "controller's previous sample (angles, force) not finite");
         }
     }
+    return 0;
+}
+
+/* --- Model Exchange (model_me.h) --------------------------------------------------------------
+ * A sampled-data model: no continuous states and no event indicators. Each sample instant
+ * t_k = start_time + k * sample_period is a time event; at it the sample is taken from the
+ * inputs the host has set (take_sample, as in model_step), and the outputs hold until the next. */
+
+int model_me_check(const Data *d, char *msg)
+{
+    (void)d;
+    (void)msg;
+    return 0;
+}
+
+void model_me_get_states(const Data *d, double x[])
+{
+    (void)d;
+    (void)x;
+}
+
+void model_me_set_states(Data *d, const double x[])
+{
+    (void)d;
+    (void)x;
+}
+
+int model_me_evaluate(Data *d, char *msg)
+{
+    (void)d; /* the outputs are the held sample, written by take_sample */
+    (void)msg;
+    return 0;
+}
+
+int model_me_event_indicators(const Data *d, double z[], char *msg)
+{
+    (void)d;
+    (void)z;
+    (void)msg;
+    return 0;
+}
+
+int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
+{
+    ModelState *m = &d->m;
+    Params p;
+    double q[3], f[3], qd_meas[3], tol;
+    int64_t k;
+    read_params(d, &p);
+    tol = TIME_TOL * p.ts;
+    if (m->start_time + (double)m->k_next * p.ts <= t + tol) {
+        if (split_inputs(d, q, f, qd_meas, msg)) {
+            return 1;
+        }
+        /* every sample due by t (more than one only if the host skipped a time event: those
+         * use the inputs at t, as model_step does inside a step) */
+        for (k = m->k_next; m->start_time + (double)k * p.ts <= t + tol; k++) {
+            if (m->start_time + (double)k * p.ts < t - tol) {
+                m->held_input_samples += 1;
+            }
+            if (take_sample(d, &p, k, q, f, qd_meas, msg)) {
+                return 1;
+            }
+        }
+        m->k_next = k;
+        ev->changed = 1;
+    }
+    m->t = t;
+    ev->next_defined = 1;
+    ev->next = m->start_time + (double)m->k_next * p.ts;
     return 0;
 }

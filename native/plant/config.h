@@ -3,7 +3,7 @@
 #define CONFIG_H
 
 #define MODEL_IDENTIFIER_STR "PumaPlant"
-#define N_VARS 56
+#define N_VARS 62
 
 enum {
     VR_a1 = 0,
@@ -62,6 +62,12 @@ enum {
     VR_phid = 53,
     VR_contact_force = 54,
     VR_penetration = 55,
+    VR_der_q1_true = 56,
+    VR_der_q2_true = 57,
+    VR_der_q3_true = 58,
+    VR_der_qd1 = 59,
+    VR_der_qd2 = 60,
+    VR_der_qd3 = 61,
 };
 
 static const VarInfo VARS[N_VARS] = {
@@ -121,6 +127,25 @@ static const VarInfo VARS[N_VARS] = {
     {"phid", T_REAL, C_OUTPUT, 0.0, NULL, 0, 0.0},
     {"contact_force", T_REAL, C_OUTPUT, 0.0, NULL, 0, 0.0},
     {"penetration", T_REAL, C_OUTPUT, 0.0, NULL, 0, 0.0},
+    {"der(q1_true)", T_REAL, C_LOCAL, 0.0, NULL, 0, 0.0},
+    {"der(q2_true)", T_REAL, C_LOCAL, 0.0, NULL, 0, 0.0},
+    {"der(q3_true)", T_REAL, C_LOCAL, 0.0, NULL, 0, 0.0},
+    {"der(qd1)", T_REAL, C_LOCAL, 0.0, NULL, 0, 0.0},
+    {"der(qd2)", T_REAL, C_LOCAL, 0.0, NULL, 0, 0.0},
+    {"der(qd3)", T_REAL, C_LOCAL, 0.0, NULL, 0, 0.0},
+};
+
+#define MODEL_EXCHANGE 1
+#define N_STATES 6
+#define N_EVENT_INDICATORS 1
+/* states: q1_true, q2_true, q3_true, qd1, qd2, qd3 */
+static const int DERIVATIVE_VRS[N_STATES] = {
+    VR_der_q1_true,
+    VR_der_q2_true,
+    VR_der_q3_true,
+    VR_der_qd1,
+    VR_der_qd2,
+    VR_der_qd3,
 };
 
 #endif

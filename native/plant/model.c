@@ -14,6 +14,7 @@
 #include "arm_terms.h"
 #include "glue.h"
 #include "linalg3.h"
+#include "model_me.h"
 #include "ode.h"
 #include "pyrandom.h"
 
@@ -27,7 +28,8 @@ typedef struct {
     double wall_x, wall_k, wall_d;
     double tau[3];
     int in_contact;
-    int64_t *budget; /* evaluations of eq. (1) left in this step (max_rhs_evaluations) */
+    int64_t *budget; /* evaluations of eq. (1) left in this step (max_rhs_evaluations), or NULL
+                        outside a co-simulation step (Model Exchange: one evaluation per call) */
     int max_evaluations;
 } PlantCtx;
 
@@ -65,7 +67,7 @@ static void read_ctx(const Data *d, PlantCtx *c)
     c->tau[1] = d->r[VR_tau2];
     c->tau[2] = d->r[VR_tau3];
     c->in_contact = d->m.in_contact;
-    c->budget = NULL; /* set by model_step, the only caller of plant_rhs */
+    c->budget = NULL; /* set by model_step */
     c->max_evaluations = 0;
 }
 
@@ -151,8 +153,7 @@ static int plant_rhs(void *ctx, const double y[ODE_N], double out[ODE_N], char *
     const double q[3] = {y[0], y[1], y[2]};
     const double qd[3] = {y[3], y[4], y[5]};
     double net[3], qdd[3];
-    *c->budget -= 1;
-    if (*c->budget < 0) {
+    if (c->budget && --*c->budget < 0) {
         snprintf(err, ODE_MSG_MAX,
                  "more than %d evaluations of the dynamics in one communication step (parameter"
                  " max_rhs_evaluations): take a smaller step",
@@ -445,6 +446,119 @@ int model_check_state(const Data *d, char *msg)
     }
     if (r->has_gauss_next && !isfinite(r->gauss_next)) {
         return fail(msg, "noise generator's cached deviate is not finite");
+    }
+    return 0;
+}
+
+/* --- Model Exchange (instance.h) ------------------------------------------------------------
+ * The continuous states are (q1..q3, qd1..qd3), the order of the state vector y of plant_rhs and
+ * of PlantModel.MODEL_EXCHANGE.states; the derivatives come from plant_rhs itself, the right-hand
+ * side the co-simulation integrator uses. The contact mode is the discrete state: the event
+ * indicator is plant_event's switching function for the current mode (it turns positive where
+ * the contact closes, resp. opens), and the mode switches at that event, as in model_step. */
+
+int model_me_check(const Data *d, char *msg)
+{
+    if (d->r[VR_q_noise] != 0.0 || d->r[VR_q_quant] != 0.0) {
+        return fail(msg,
+                    "q_noise = %g and q_quant = %g: under Model Exchange the encoders are ideal"
+                    " (q1..q3 are the true angles); encoder noise and quantization are"
+                    " sampled-data effects of the co-simulation interface: set both to 0 or"
+                    " use co-simulation",
+                    d->r[VR_q_noise], d->r[VR_q_quant]);
+    }
+    return 0;
+}
+
+void model_me_get_states(const Data *d, double x[])
+{
+    for (int i = 0; i < 3; i++) {
+        x[i] = d->m.q[i];
+        x[3 + i] = d->m.qd[i];
+    }
+}
+
+void model_me_set_states(Data *d, const double x[])
+{
+    for (int i = 0; i < 3; i++) {
+        d->m.q[i] = x[i];
+        d->m.qd[i] = x[3 + i];
+    }
+}
+
+int model_me_evaluate(Data *d, char *msg)
+{
+    ModelState *m = &d->m;
+    PlantCtx c;
+    double y[ODE_N], dy[ODE_N];
+    char err[ODE_MSG_MAX];
+    read_ctx(d, &c);
+    model_me_get_states(d, y);
+    if (plant_rhs(&c, y, dy, err)) {
+        return fail(msg, "plant derivatives failed: %s", err);
+    }
+    for (int k = 0; k < N_STATES; k++) {
+        d->r[DERIVATIVE_VRS[k]] = dy[k];
+    }
+    memcpy(m->q_meas, m->q, sizeof m->q_meas); /* ideal encoders (model_me_check) */
+    write_outputs(d);
+    return 0;
+}
+
+int model_me_event_indicators(const Data *d, double z[], char *msg)
+{
+    PlantCtx c;
+    double y[ODE_N];
+    char err[ODE_MSG_MAX];
+    read_ctx(d, &c);
+    model_me_get_states(d, y);
+    if (plant_event(&c, y, &z[0], err)) {
+        return fail(msg, "contact event indicator failed: %s", err);
+    }
+    return 0;
+}
+
+/* The current mode's switching function an instant (LOOKAHEAD) later along the trajectory:
+ * decides the switch where the host's root finder stopped exactly on the root (g == 0), where
+ * model_step would have stopped just past it (g > 0). */
+#define LOOKAHEAD 1e-9 /* s */
+
+static int switching_function_ahead(const Data *d, double *g, char *msg)
+{
+    PlantCtx c;
+    double y[ODE_N], dy[ODE_N];
+    char err[ODE_MSG_MAX];
+    read_ctx(d, &c);
+    model_me_get_states(d, y);
+    if (plant_rhs(&c, y, dy, err)) {
+        return fail(msg, "plant derivatives failed: %s", err);
+    }
+    for (int k = 0; k < ODE_N; k++) {
+        y[k] += LOOKAHEAD * dy[k];
+    }
+    if (plant_event(&c, y, g, err)) {
+        return fail(msg, "contact event indicator failed: %s", err);
+    }
+    return 0;
+}
+
+int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
+{
+    double g;
+    (void)t; /* no time events: the contact is a state event */
+    if (model_me_event_indicators(d, &g, msg)) {
+        return 1;
+    }
+    if (g == 0.0 && switching_function_ahead(d, &g, msg)) {
+        return 1;
+    }
+    if (g > 0.0) { /* the current mode's switching function crossed: switch, as model_step */
+        d->m.in_contact = !d->m.in_contact;
+        ev->changed = 1;
+        if (model_me_event_indicators(d, &g, msg)) {
+            return 1;
+        }
+        ev->again = g > 0.0;
     }
     return 0;
 }

@@ -16,24 +16,7 @@
 #include "fmi2Functions.h"
 #include "glue.h"
 #include "guid.h" /* MODEL_GUID, written by the build */
-
-typedef enum { S_INSTANTIATED, S_INITIALIZATION, S_STEP_COMPLETE, S_TERMINATED } Phase;
-
-typedef struct {
-    Data d;
-    Phase phase;
-    int dirty; /* outputs must be recomputed before they are read (initialization mode) */
-    double last_time;
-} Snapshot; /* everything an FMU state holds */
-
-typedef struct {
-    unsigned magic; /* INSTANCE_MAGIC while alive; fmi2FreeInstance clears it */
-    Snapshot s;
-    fmi2CallbackFunctions cb;
-    char name[128];
-    int logging_on;
-    char msg[MSG_MAX];
-} Instance;
+#include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is fmi2_me.c */
 
 #define SERIAL_MAGIC 0x494d5043u   /* "IMPC" */
 #define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
@@ -64,8 +47,7 @@ int fail(char *msg, const char *fmt, ...)
     return 1;
 }
 
-static void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt,
-                        ...)
+void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...)
 {
     char text[MSG_MAX + 64];
     va_list ap;
@@ -92,21 +74,11 @@ static void log_message(Instance *inst, fmi2Status status, const char *category,
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
 }
 
-#define ERROR(inst, ...) (log_message((inst), fmi2Error, "logStatusError", __VA_ARGS__), fmi2Error)
-
-/* Every entry point first checks that c is a live instance of this FMU: not NULL, and carrying
- * INSTANCE_MAGIC, which fmi2FreeInstance clears. This catches a second fmi2FreeInstance and most
- * calls on a freed instance, but not all: once the allocator has reused the freed block for a new
- * instance, a stale pointer to it looks valid again (and reading a freed block is itself undefined
- * behaviour that merely happens to work with common allocators). The host's logger cannot be
- * trusted for such a call (it lives in the instance), so the refusal goes to stderr. */
-static int instance_ok(const Instance *inst, const char *function);
-
 /* A function this FMU does not provide: fmi2Error, logged when the instance is alive. */
 #define REFUSE(c, function, ...)                                                                   \
     (instance_ok((Instance *)(c), function) ? ERROR((Instance *)(c), __VA_ARGS__) : fmi2Error)
 
-static int instance_ok(const Instance *inst, const char *function)
+int instance_ok(const Instance *inst, const char *function)
 {
     if (!inst) {
         fprintf(stderr, "%s: %s called with a NULL instance: refused\n", MODEL_IDENTIFIER_STR,
@@ -164,6 +136,9 @@ static int initialize(Instance *inst)
     if (model_initialize(&tmp, inst->msg)) {
         return 1;
     }
+    if (inst->type == fmi2ModelExchange && me_initialize(&tmp, inst->msg)) {
+        return 1;
+    }
     inst->s.d = tmp;
     inst->s.dirty = 0;
     return 0;
@@ -195,7 +170,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->cb = *functions;
     strncpy(inst->name, instanceName ? instanceName : "", sizeof inst->name - 1);
     inst->logging_on = loggingOn;
-    if (fmuType != fmi2CoSimulation) {
+    inst->type = fmuType;
+    if (fmuType != fmi2CoSimulation && !(fmuType == fmi2ModelExchange && ME_SUPPORTED)) {
         log_message(inst, fmi2Error, "logStatusError", "%s supports co-simulation only",
                     MODEL_IDENTIFIER_STR);
         free(inst);
@@ -284,7 +260,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     if (inst->s.dirty && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);
     }
-    inst->s.phase = S_STEP_COMPLETE;
+    inst->s.phase = inst->type == fmi2ModelExchange ? S_EVENT_MODE : S_STEP_COMPLETE;
     return fmi2OK;
 }
 
@@ -294,7 +270,7 @@ fmi2Status fmi2Terminate(fmi2Component c)
     if (!instance_ok(inst, "fmi2Terminate")) {
         return fmi2Error;
     }
-    if (inst->s.phase != S_STEP_COMPLETE) {
+    if (inst->s.phase < S_STEP_COMPLETE || inst->s.phase == S_TERMINATED) {
         return ERROR(inst, "fmi2Terminate called before initialization finished or twice");
     }
     inst->s.phase = S_TERMINATED;
@@ -311,6 +287,7 @@ fmi2Status fmi2Reset(fmi2Component c)
     inst->s.phase = S_INSTANTIATED;
     inst->s.dirty = 1;
     inst->s.last_time = 0.0;
+    inst->s.me_time_set = 0;
     return fmi2OK;
 }
 
@@ -343,6 +320,10 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
             if (v->causality == C_OUTPUT) {
                 return ERROR(inst, "variable %s is an output: it cannot be set", v->name);
             }
+            if (v->causality == C_LOCAL) {
+                return ERROR(inst, "variable %s is computed by the model: it cannot be set",
+                             v->name);
+            }
             if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION) {
                 return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
                              v->name);
@@ -358,12 +339,15 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
     if (!setting && inst->s.dirty && inst->s.phase == S_INITIALIZATION && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);
     }
+    if (!setting && inst->type == fmi2ModelExchange && inst->s.phase > S_INITIALIZATION) {
+        return me_update(inst);
+    }
     return fmi2OK;
 }
 
 static void mark_dirty(Instance *inst)
 {
-    if (inst->s.phase <= S_INITIALIZATION) {
+    if (inst->s.phase <= S_INITIALIZATION || inst->type == fmi2ModelExchange) {
         inst->s.dirty = 1;
     }
 }
@@ -554,12 +538,24 @@ fmi2Status fmi2CancelStep(fmi2Component c)
  * pass the same checks as when they are set, inputs are finite, Booleans 0 or 1, strings
  * NUL-terminated within STRING_MAX, times finite; the model's own state (counters, indices,
  * enumerations) is checked by model_check_state once initialization has built it. */
-static int check_snapshot(const Snapshot *s, char *msg)
+static int check_snapshot(const Snapshot *s, fmi2Type type, char *msg)
 {
     const unsigned phase = (unsigned)s->phase;
+    const int me_phase = s->phase == S_EVENT_MODE || s->phase == S_CONTINUOUS_TIME;
     int built;
     if (phase > (unsigned)S_TERMINATED) {
         return fail(msg, "phase %u is not a phase of the FMI state machine", phase);
+    }
+    if (me_phase != (type == fmi2ModelExchange) && s->phase != S_INSTANTIATED &&
+        s->phase != S_INITIALIZATION && s->phase != S_TERMINATED) {
+        return fail(msg, "phase %u belongs to the other interface (co-simulation / Model "
+                         "Exchange) than this instance's", phase);
+    }
+    if (s->me_time_set != 0 && s->me_time_set != 1) {
+        return fail(msg, "flag 'me_time_set' is %d, not 0 or 1", s->me_time_set);
+    }
+    if (!isfinite(s->me_time) || s->event_switches < 0 || s->event_switches > 1000) {
+        return fail(msg, "Model Exchange time not finite or event counter out of range");
     }
     if (s->dirty != 0 && s->dirty != 1) {
         return fail(msg, "flag 'dirty' is %d, not 0 or 1", s->dirty);
@@ -588,6 +584,8 @@ static int check_snapshot(const Snapshot *s, char *msg)
         }
     }
     built = s->phase >= S_STEP_COMPLETE || (s->phase == S_INITIALIZATION && !s->dirty);
+    /* (under Model Exchange, states and inputs may change the outputs after initialization:
+     * dirty is then legitimately 1 in event or continuous-time mode, with the model built) */
     return built ? model_check_state(&s->d, msg) : 0;
 }
 
@@ -655,7 +653,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
     if (!state_ok(inst, box, "fmi2SetFMUstate")) {
         return fmi2Error;
     }
-    if (check_snapshot(&box->s, inst->msg)) {
+    if (check_snapshot(&box->s, inst->type, inst->msg)) {
         return ERROR(inst, "fmi2SetFMUstate: invalid FMU state (%s): refused", inst->msg);
     }
     inst->s = box->s;
@@ -748,7 +746,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
                      MODEL_IDENTIFIER_STR);
     }
     memcpy(&body, serializedState + sizeof header, sizeof body);
-    if (check_snapshot(&body, inst->msg)) {
+    if (check_snapshot(&body, inst->type, inst->msg)) {
         return ERROR(inst, "serialized state refused: %s", inst->msg);
     }
     box = state_for_writing(inst, state, "fmi2DeSerializeFMUstate");

@@ -25,7 +25,7 @@
 #define MSG_MAX 512
 
 typedef enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING } VarType;
-typedef enum { C_PARAMETER, C_INPUT, C_OUTPUT } Causality;
+typedef enum { C_PARAMETER, C_INPUT, C_OUTPUT, C_LOCAL } Causality;
 
 typedef struct {
     const char *name;

@@ -1,20 +1,47 @@
-/* A tiny FMI 2.0 co-simulation host with no Python in the process: it dlopens two FMU libraries,
+/* A tiny FMI 2.0 co-simulation host with no Python in the process: it loads two FMU libraries,
  * wires them, initializes them (exchanging initial values) and runs a Gauss-Seidel loop
  * (first FMU first), writing recorded values as CSV. Used by tests/test_native.py, also under
- * valgrind.
+ * valgrind, and cross-compiled for win64 (run under wine) and aarch64 Linux (run under qemu) by
+ * tests/test_platforms.py.
  *
  * usage: host A.so GUID_A RES_A B.so GUID_B RES_B STEPS H OUT.csv CONNECTIONS RECORD [PARAMS]
  *   CONNECTIONS  comma-separated "A12>B34" (output vr 12 of A feeds input vr 34 of B)
  *   RECORD       comma-separated Real variables to record, e.g. "A53,B55"
  *   PARAMS       optional comma-separated Real parameters, e.g. "B31=80"
+ *   H            the step size, a number or a ratio such as "1/400" (divided here, so every
+ *                platform's C library gets the same double)
  */
-#include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
+
+#ifdef _WIN32
+#include <windows.h>
+static void *open_library(const char *path) { return (void *)LoadLibraryA(path); }
+static void *library_symbol(void *lib, const char *name)
+{
+    FARPROC f = GetProcAddress((HMODULE)lib, name);
+    void *p;
+    memcpy(&p, &f, sizeof p); /* function pointer to void *, as dlsym returns it */
+    return p;
+}
+static void close_library(void *lib) { FreeLibrary((HMODULE)lib); }
+static const char *library_error(void)
+{
+    static char text[64];
+    snprintf(text, sizeof text, "LoadLibrary failed with error %lu", (unsigned long)GetLastError());
+    return text;
+}
+#else
+#include <dlfcn.h>
+static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void *library_symbol(void *lib, const char *name) { return dlsym(lib, name); }
+static void close_library(void *lib) { dlclose(lib); }
+static const char *library_error(void) { return dlerror(); }
+#endif
 
 #define MAX_LINKS 64
 
@@ -51,7 +78,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
 
 static void *sym(void *lib, const char *name)
 {
-    void *f = dlsym(lib, name);
+    void *f = library_symbol(lib, name);
     if (!f) {
         fprintf(stderr, "missing symbol %s\n", name);
         exit(2);
@@ -61,9 +88,9 @@ static void *sym(void *lib, const char *name)
 
 static void load(Fmu *f, const char *path)
 {
-    f->lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    f->lib = open_library(path);
     if (!f->lib) {
-        fprintf(stderr, "dlopen %s: %s\n", path, dlerror());
+        fprintf(stderr, "loading %s: %s\n", path, library_error());
         exit(2);
     }
     f->instantiate = (fmi2InstantiateTYPE *)sym(f->lib, "fmi2Instantiate");
@@ -124,7 +151,7 @@ int main(int argc, char **argv)
         return 2;
     }
     steps = atol(argv[7]);
-    h = atof(argv[8]);
+    h = strchr(argv[8], '/') ? atof(argv[8]) / atof(strchr(argv[8], '/') + 1) : atof(argv[8]);
     for (spec = argv[10], tok = strtok(spec, ","); tok && n_links < MAX_LINKS;
          tok = strtok(NULL, ",")) {
         char a, b;
@@ -195,7 +222,7 @@ int main(int argc, char **argv)
     for (int k = 0; k < 2; k++) {
         check(fmus[k].terminate(fmus[k].c), "fmi2Terminate");
         fmus[k].free_instance(fmus[k].c);
-        dlclose(fmus[k].lib);
+        close_library(fmus[k].lib);
     }
     return 0;
 }

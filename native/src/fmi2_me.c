@@ -1,0 +1,307 @@
+/* The FMI 2.0 Model Exchange interface of the native models that offer it (config.h defines
+ * MODEL_EXCHANGE), in the same binary as their co-simulation interface (fmi2_glue.c).
+ *
+ * State machine (FMI 2.0, section 3.2.3): instantiated -> initialization mode -> event mode
+ * <-> continuous-time mode -> terminated; a call out of order returns fmi2Error with a logged
+ * message and changes nothing. The host owns time and the continuous states: fmi2SetTime,
+ * fmi2SetContinuousStates and fmi2Set<Type> mark the outputs and derivatives stale, and the next
+ * getter recomputes them once (model_me_evaluate). The model's discrete state (the plant's
+ * contact mode, the controller's samples) changes only in event mode, in fmi2NewDiscreteStates,
+ * which also announces the model's next time event (the controller's next sample instant);
+ * continuous states never jump.
+ */
+#include <math.h>
+#include <stddef.h>
+
+#include "fmi2Functions.h"
+#include "glue.h"
+#include "instance.h"
+
+#define MAX_EVENT_SWITCHES 10 /* discrete-state updates at one event instant */
+
+#ifdef MODEL_EXCHANGE
+
+/* The instance's time: the last fmi2SetTime, else the start time. */
+static double now(const Instance *inst)
+{
+    return inst->s.me_time_set ? inst->s.me_time : inst->s.d.start_time;
+}
+
+int me_initialize(Data *d, char *msg)
+{
+    if (model_me_check(d, msg)) {
+        return 1;
+    }
+    return model_me_evaluate(d, msg);
+}
+
+fmi2Status me_update(Instance *inst)
+{
+    if (!inst->s.dirty) {
+        return fmi2OK;
+    }
+    if (model_me_evaluate(&inst->s.d, inst->msg)) {
+        return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
+    }
+    inst->s.dirty = 0;
+    return fmi2OK;
+}
+
+/* The instance, if it is a Model Exchange instance in one of the allowed phases (a bit set of
+ * 1 << Phase); otherwise log why not and return NULL. */
+static Instance *me_instance(fmi2Component c, unsigned allowed, const char *function)
+{
+    Instance *inst = (Instance *)c;
+    if (!instance_ok(inst, function)) {
+        return NULL;
+    }
+    if (inst->type != fmi2ModelExchange) {
+        log_message(inst, fmi2Error, "logStatusError",
+                    "%s is a Model Exchange function, but this instance is for co-simulation",
+                    function);
+        return NULL;
+    }
+    if (!(allowed & (1u << inst->s.phase))) {
+        static const char *const names[] = {"instantiated",      "initialization mode",
+                                            "step complete",     "event mode",
+                                            "continuous-time mode", "terminated"};
+        log_message(inst, fmi2Error, "logStatusError", "%s cannot be called in %s", function,
+                    names[inst->s.phase]);
+        return NULL;
+    }
+    return inst;
+}
+
+#define IN(p) (1u << (p))
+#define EVALUATED (IN(S_INITIALIZATION) | IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME) | IN(S_TERMINATED))
+
+/* An array argument of n values where the FMU has expected: NULL or a wrong count is an error. */
+static int bad_array(Instance *inst, const void *array, size_t n, size_t expected,
+                     const char *function, const char *what)
+{
+    if (n > 0 && !array) {
+        log_message(inst, fmi2Error, "logStatusError", "%s: the %s array is NULL", function,
+                    what);
+        return 1;
+    }
+    if (n != expected) {
+        log_message(inst, fmi2Error, "logStatusError", "%s: %lu %s given, this FMU has %lu",
+                    function, (unsigned long)n, what, (unsigned long)expected);
+        return 1;
+    }
+    return 0;
+}
+
+/* In initialization mode the outputs come from (re)initialization, as for the getters. */
+static fmi2Status refresh(Instance *inst)
+{
+    if (inst->s.phase == S_INITIALIZATION) {
+        const fmi2ValueReference none[1] = {0};
+        return fmi2GetReal(inst, none, 0, NULL);
+    }
+    return me_update(inst);
+}
+
+/* --- mode changes --------------------------------------------------------------------------- */
+
+fmi2Status fmi2EnterEventMode(fmi2Component c)
+{
+    Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2EnterEventMode");
+    if (!inst) {
+        return fmi2Error;
+    }
+    inst->s.phase = S_EVENT_MODE;
+    inst->s.event_switches = 0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
+{
+    Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2NewDiscreteStates");
+    MeEvent ev = {0, 0, 0, 0.0};
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (!eventInfo) {
+        return ERROR(inst, "fmi2NewDiscreteStates: eventInfo is NULL");
+    }
+    if (model_me_event_update(&inst->s.d, now(inst), &ev, inst->msg)) {
+        return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
+    }
+    if (ev.changed) {
+        inst->s.dirty = 1;
+        inst->s.event_switches += 1;
+        if (inst->s.event_switches > MAX_EVENT_SWITCHES) {
+            return ERROR(inst, "at t=%.17g: more than %d discrete-state changes at one event",
+                         now(inst), MAX_EVENT_SWITCHES);
+        }
+    }
+    eventInfo->newDiscreteStatesNeeded = ev.again ? fmi2True : fmi2False;
+    eventInfo->terminateSimulation = fmi2False;
+    eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
+    eventInfo->valuesOfContinuousStatesChanged = fmi2False; /* no state jumps */
+    eventInfo->nextEventTimeDefined = ev.next_defined ? fmi2True : fmi2False;
+    eventInfo->nextEventTime = ev.next_defined ? ev.next : 0.0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
+{
+    Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2EnterContinuousTimeMode");
+    if (!inst) {
+        return fmi2Error;
+    }
+    inst->s.phase = S_CONTINUOUS_TIME;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
+                                       fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean *enterEventMode,
+                                       fmi2Boolean *terminateSimulation)
+{
+    Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2CompletedIntegratorStep");
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (!enterEventMode || !terminateSimulation) {
+        return ERROR(inst, "fmi2CompletedIntegratorStep: NULL output argument");
+    }
+    *enterEventMode = fmi2False; /* no step events: the contact is found by event indicators */
+    *terminateSimulation = fmi2False;
+    return fmi2OK;
+}
+
+/* --- time and states ------------------------------------------------------------------------ */
+
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
+{
+    Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2SetTime");
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (!isfinite(time)) {
+        return ERROR(inst, "fmi2SetTime: time is not finite (%g)", time);
+    }
+    inst->s.me_time = time;
+    inst->s.me_time_set = 1;
+    inst->s.last_time = time;
+    inst->s.dirty = 1;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
+{
+    Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2SetContinuousStates");
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (bad_array(inst, x, nx, N_STATES, "fmi2SetContinuousStates", "states")) {
+        return fmi2Error;
+    }
+    for (size_t k = 0; k < nx; k++) { /* check all before changing anything */
+        if (!isfinite(x[k])) {
+            return ERROR(inst, "fmi2SetContinuousStates: state %lu is not finite (%g)",
+                         (unsigned long)k + 1, x[k]);
+        }
+    }
+    model_me_set_states(&inst->s.d, x);
+    inst->s.dirty = 1;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
+{
+    Instance *inst = me_instance(c, EVALUATED, "fmi2GetContinuousStates");
+    fmi2Status status;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (bad_array(inst, x, nx, N_STATES, "fmi2GetContinuousStates", "states")) {
+        return fmi2Error;
+    }
+    status = refresh(inst);
+    if (status != fmi2OK) {
+        return status;
+    }
+    model_me_get_states(&inst->s.d, x);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
+{
+    Instance *inst = me_instance(c, IN(S_INSTANTIATED) | EVALUATED,
+                                 "fmi2GetNominalsOfContinuousStates");
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (bad_array(inst, x_nominal, nx, N_STATES, "fmi2GetNominalsOfContinuousStates", "states")) {
+        return fmi2Error;
+    }
+    for (size_t k = 0; k < nx; k++) {
+        x_nominal[k] = 1.0; /* rad and rad/s: the angles and velocities are of order one */
+    }
+    return fmi2OK;
+}
+
+/* --- model equations ------------------------------------------------------------------------ */
+
+fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
+{
+    Instance *inst = me_instance(c, EVALUATED, "fmi2GetDerivatives");
+    fmi2Status status;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (bad_array(inst, derivatives, nx, N_STATES, "fmi2GetDerivatives", "derivatives")) {
+        return fmi2Error;
+    }
+    status = refresh(inst);
+    if (status != fmi2OK) {
+        return status;
+    }
+#if N_STATES > 0
+    for (size_t k = 0; k < nx; k++) {
+        derivatives[k] = inst->s.d.r[DERIVATIVE_VRS[k]];
+    }
+#endif
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
+{
+    Instance *inst = me_instance(c, EVALUATED, "fmi2GetEventIndicators");
+    fmi2Status status;
+    if (!inst) {
+        return fmi2Error;
+    }
+    if (bad_array(inst, eventIndicators, ni, N_EVENT_INDICATORS, "fmi2GetEventIndicators",
+                  "event indicators")) {
+        return fmi2Error;
+    }
+    status = refresh(inst);
+    if (status != fmi2OK) {
+        return status;
+    }
+    if (model_me_event_indicators(&inst->s.d, eventIndicators, inst->msg)) {
+        return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
+    }
+    return fmi2OK;
+}
+
+#else /* co-simulation only: fmi2Instantiate refuses fmi2ModelExchange, these are never reached */
+
+int me_initialize(Data *d, char *msg)
+{
+    (void)d;
+    return fail(msg, "%s supports co-simulation only", MODEL_IDENTIFIER_STR);
+}
+
+fmi2Status me_update(Instance *inst)
+{
+    (void)inst;
+    return fmi2OK;
+}
+
+#endif

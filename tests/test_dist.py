@@ -1,0 +1,127 @@
+"""The distribution bundle, and reproducible builds: the same sources give the same bytes."""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from impedance_cosim.build import FMUS, REPO, build_fmu, build_ssp
+from impedance_cosim.cli import main
+from impedance_cosim.dist import DATE, NAME, build_dist, bundle, expected_members
+
+ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu")
+
+
+@pytest.fixture(scope="module")
+def two_builds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The bundle built twice from scratch, in two temporary folders: once in this process,
+    once through the command line in a fresh process (so no cache is shared)."""
+    a = tmp_path_factory.mktemp("build_a")
+    b = tmp_path_factory.mktemp("build_b")
+    build_dist(a / "dist", a / "fmus")
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "impedance_cosim.cli",
+            "dist",
+            str(b / "dist"),
+            "--out",
+            str(b / "fmus"),
+        ],  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == f"wrote {b / 'dist' / (NAME + '.zip')}"
+    return a, b
+
+
+def archives(folder: Path) -> dict[str, bytes]:
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for pattern in ARCHIVES
+        for p in folder.glob(pattern)
+    }
+
+
+def test_building_twice_gives_identical_bytes(two_builds, fmu_dir: Path, native_dir: Path):
+    a, b = two_builds
+    first, second = archives(a / "fmus"), archives(b / "fmus")
+    assert sorted(first) == sorted(expected_members())
+    for name in first:
+        assert first[name] == second[name], f"{name} differs between two builds"
+    assert (a / "dist" / f"{NAME}.zip").read_bytes() == (b / "dist" / f"{NAME}.zip").read_bytes()
+    # the test session's own build (another folder, earlier) gives the same archives too
+    session = archives(fmu_dir)
+    assert len(session) == 7
+    for name, data in session.items():
+        assert data == first[name], f"{name} differs from the session's build"
+
+
+def test_every_member_has_a_fixed_date_and_mode(two_builds):
+    a, _ = two_builds
+    zips = [*(a / "fmus").rglob("*.fmu"), *(a / "fmus").glob("*.ssp"), a / "dist" / f"{NAME}.zip"]
+    assert len(zips) == 8
+    for path in zips:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                assert info.date_time == DATE, (path.name, info.filename)
+                mode = info.external_attr >> 16
+                assert mode in (0o644, 0o755), (path.name, info.filename, oct(mode))
+                assert (mode == 0o755) == info.filename.startswith("binaries/"), info.filename
+
+
+def test_bundle_contents(two_builds):
+    a, _ = two_builds
+    with zipfile.ZipFile(a / "dist" / f"{NAME}.zip") as z:
+        names = z.namelist()
+        assert names == sorted(names)
+        assert all(n.startswith(f"{NAME}/") for n in names)
+        files = {n.removeprefix(f"{NAME}/"): z.read(n) for n in names}
+    for member in expected_members():
+        assert files[f"fmus/{member}"] == (a / "fmus" / member).read_bytes(), member
+    for ref in ("PumaPlant_ref.csv", "ImpedanceController_ref.csv", "PaperScenario_ref.csv"):
+        source = next(REPO.glob(f"*/{ref}"))
+        assert files[f"reference/{ref}"] == source.read_bytes(), ref
+    assert files["LICENSE"] == (REPO / "LICENSE").read_bytes()
+    readme = files["README.txt"].decode()
+    for member in expected_members():
+        assert f"fmus/{member}" in readme, member
+    assert "BSD-2-Clause" in readme
+    sums = dict(line.split("  ")[::-1] for line in files["SHA256SUMS"].decode().splitlines())
+    assert sorted(sums) == sorted(n for n in files if n != "SHA256SUMS")
+    for name, digest in sums.items():
+        assert hashlib.sha256(files[name]).hexdigest() == digest, name
+
+
+def test_incomplete_bundle_refused(tmp_path: Path):
+    out = tmp_path / "fmus"
+    built = [build_fmu(spec, out) for spec in FMUS.values()] + [build_ssp(out)]  # no native
+    with pytest.raises(ValueError, match="missing native/PumaPlant.fmu"):
+        bundle(built, out, tmp_path / "dist")
+    assert not (tmp_path / "dist" / f"{NAME}.zip").exists()
+
+
+def test_dist_without_a_compiler_says_so(tmp_path: Path, monkeypatch, capsys):
+    monkeypatch.setenv("CC", "no-such-compiler-here")
+    assert main(["dist", str(tmp_path / "dist"), "--out", str(tmp_path / "fmus")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("impedance-cosim dist: error: the bundle is incomplete, missing")
+    assert "C compiler" in err[-1]
+    assert not (tmp_path / "dist").exists() or not any((tmp_path / "dist").iterdir())
+
+
+def test_dist_into_a_file_says_so(tmp_path: Path, capsys):
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("x")
+    assert main(["dist", str(blocker / "dist"), "--out", str(tmp_path / "fmus")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("impedance-cosim dist: error: cannot write"), err
+    assert "not_a_folder" in err[-1] and "Traceback" not in "".join(err)

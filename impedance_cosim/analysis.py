@@ -24,13 +24,12 @@ TARGET_FORCE = 1e4 * 0.00196
 
 
 def write_csv(path: Path, names: list[str], data: np.ndarray) -> None:
-    """Results as CSV: a header of names ("time" first), 17 significant digits per value;
-    readable by fmpy.util.read_csv, so fmpy's plotting works on it."""
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(names)
-        for row in data:
-            w.writerow([repr(float(v)) for v in row])
+    """Results as CSV: a header of names ("time" first), each value the shortest text that reads
+    back exactly; readable by fmpy.util.read_csv, so fmpy's plotting works on it. Written to a
+    temporary file renamed into place (see results.py)."""
+    from impedance_cosim import results
+
+    results.write_csv(path, names, data)
 
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import impedance_cosim
 from impedance_cosim import toolchains
+from impedance_cosim.atomic import temp_path
 from impedance_cosim.fmi.variables import model_description
 
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
@@ -120,7 +121,7 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
         digest.update(xml(""))
         guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
-        tmp_target = target.with_suffix(".fmu.tmp")
+        tmp_target = temp_path(target)
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as zout:
             for name in ["modelDescription.xml", *members]:
                 info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
@@ -191,7 +192,7 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
             raise RuntimeError("the native build runs on linux64 (x86_64) only")
         binaries = toolchains.build_binaries(src, cls.MODEL_NAME, c_files)
         target = out_dir / f"{cls.MODEL_NAME}.fmu"
-        tmp_target = target.with_suffix(".fmu.tmp")
+        tmp_target = temp_path(target)
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr(_info("modelDescription.xml"), xml(guid))
             for name in sorted(binaries):
@@ -242,7 +243,7 @@ def build_ssp(
     out_dir = Path(out_dir)
     source = REPO / "ssp"
     target = out_dir / f"{name}.ssp"
-    tmp_target = target.with_suffix(".ssp.tmp")
+    tmp_target = temp_path(target)
     with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
         # writestr with fixed dates and modes (z.write would take the files' mtimes)
         z.writestr(_info("SystemStructure.ssd"), (source / "SystemStructure.ssd").read_bytes())

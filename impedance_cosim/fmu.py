@@ -4,13 +4,19 @@ status checked, every log message kept, state save/restore. The building block o
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import ctypes
+import shutil
+import tempfile
+import threading
+import zipfile
 from collections.abc import Iterable, Mapping
-from functools import cache
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from fmpy import calloc, extract, free, read_model_description
+from fmpy import calloc, extract, free, platform, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
@@ -21,16 +27,105 @@ from fmpy.fmi2 import (
 )
 
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+INT32 = (-(2**31), 2**31 - 1)  # range of fmi2Integer
+EXTRACT_PREFIX = "impcosim_fmu_"  # extraction folders in the temporary directory
 
 
 class FmuError(RuntimeError):
     """An FMI call failed; the message carries the FMU's own log messages."""
 
 
-@cache
-def _unpacked(fmu: Path, mtime: float) -> tuple[Any, str]:
-    """Model description and extraction folder of an FMU (once per file version)."""
-    return read_model_description(str(fmu)), extract(str(fmu))
+def check_fmu(fmu: Path, description: Any) -> None:
+    """FmuError naming the problem unless the archive is intact (every member's CRC) and has a
+    binary for this platform (checked once per file version)."""
+    if description.coSimulation is None:
+        raise FmuError(f"{fmu.name} is not a co-simulation FMU")
+    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}"
+    st = fmu.stat()
+    problem = _archive_problem(str(fmu), st.st_mtime_ns, st.st_size, binary)
+    if problem:
+        raise FmuError(problem)
+
+
+@lru_cache(maxsize=256)
+def _archive_problem(fmu: str, _mtime_ns: int, _size: int, binary: str) -> str | None:
+    name = Path(fmu).name
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            bad = z.testzip()
+            names = set(z.namelist())
+    except (zipfile.BadZipFile, OSError, EOFError, RuntimeError) as exc:
+        return f"{name} is not a readable FMU archive ({exc})"
+    if bad is not None:
+        return f"{name}: archive member {bad} is corrupt (CRC check failed)"
+    if binary + sharedLibraryExtension not in names:
+        have = sorted(
+            {n.split("/")[1] for n in names if n.count("/") >= 2 and n[:9] == "binaries/"}
+        )
+        return (
+            f"{name} has no binary for this platform ({binary}{sharedLibraryExtension}; "
+            f"binaries for: {', '.join(have) or 'none'})"
+        )
+    return None
+
+
+class _Extractions:
+    """fmpy's extraction folders, one per FMU file version, shared by its instances for the life
+    of the process (extracting again for every run cost ~0.1 s per run). A folder is removed at
+    exit, or earlier once no instance uses it and its FMU file has gone or changed (e.g. the
+    temporary folder of a system archive was removed)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._entries: dict[tuple, list] = {}  # (path, mtime_ns, size) -> [description, dir, users]
+
+    def acquire(self, fmu: Path) -> tuple[tuple, Any, str]:
+        st = fmu.stat()
+        key = (fmu, st.st_mtime_ns, st.st_size)
+        with self._lock:
+            self._prune()
+            entry = self._entries.get(key)
+            if entry is None:
+                try:
+                    description = read_model_description(str(fmu))
+                except Exception as exc:  # fmpy raises bare Exceptions
+                    raise FmuError(f"{fmu.name}: invalid modelDescription.xml ({exc})") from None
+                check_fmu(fmu, description)
+                folder = tempfile.mkdtemp(prefix=EXTRACT_PREFIX)
+                try:
+                    extract(str(fmu), folder)
+                except Exception as exc:
+                    shutil.rmtree(folder, ignore_errors=True)
+                    raise FmuError(f"{fmu.name} cannot be extracted ({exc})") from None
+                entry = self._entries[key] = [description, folder, 0]
+            entry[2] += 1
+            return key, entry[0], entry[1]
+
+    def release(self, key: tuple) -> None:
+        with self._lock:
+            if key in self._entries:
+                self._entries[key][2] -= 1
+
+    def _prune(self) -> None:
+        for key, (_, folder, users) in list(self._entries.items()):
+            try:
+                st = key[0].stat()
+                current = (st.st_mtime_ns, st.st_size) == key[1:]
+            except OSError:
+                current = False
+            if users <= 0 and not current:
+                del self._entries[key]
+                shutil.rmtree(folder, ignore_errors=True)
+
+    def clear(self) -> None:
+        with self._lock:
+            for _, folder, _ in self._entries.values():
+                shutil.rmtree(folder, ignore_errors=True)
+            self._entries.clear()
+
+
+_extractions = _Extractions()
+atexit.register(_extractions.clear)
 
 
 class FmuInstance:
@@ -42,24 +137,41 @@ class FmuInstance:
             raise FileNotFoundError(f"FMU {path} does not exist (run `impedance-cosim build`)")
         self.path = path
         self.name = instance_name
-        self.description, unzip_dir = _unpacked(path, path.stat().st_mtime)
-        if self.description.coSimulation is None:
-            raise FmuError(f"{path.name} is not a co-simulation FMU")
+        self._alive = False
+        self._extraction, self.description, unzip_dir = _extractions.acquire(path)
+        try:
+            self._load(unzip_dir, logging_on)
+        except BaseException:
+            self._release()
+            raise
+
+    def _load(self, unzip_dir: str, logging_on: bool) -> None:
         self.variables = {v.name: v for v in self.description.modelVariables}
         self.messages: list[tuple[str, str, str]] = []  # (status, category, message)
         self._callbacks = fmi2CallbackFunctions()
         self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self.slave = FMU2Slave(
-            guid=self.description.guid,
-            unzipDirectory=unzip_dir,
-            modelIdentifier=self.description.coSimulation.modelIdentifier,
-            instanceName=instance_name,
-        )
-        self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
-        self._alive = True
+        try:
+            self.slave = FMU2Slave(
+                guid=self.description.guid,
+                unzipDirectory=unzip_dir,
+                modelIdentifier=self.description.coSimulation.modelIdentifier,
+                instanceName=self.name,
+            )
+        except Exception as exc:  # fmpy raises bare Exceptions when the library does not load
+            text = str(exc).replace(unzip_dir + "/", "")
+            raise FmuError(
+                f"{self.name}: cannot load the binary of {self.path.name}: {text}"
+            ) from None
         self.fatal = False  # an fmi2Fatal status was returned: no further call is allowed
+        try:
+            self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
+        except FmuError:
+            with contextlib.suppress(Exception):
+                self.slave.freeLibrary()
+            raise
+        self._alive = True
         self._do_step = self.slave._functions["fmi2DoStep"]  # raw ctypes: we check the status
 
     # --- logging and status ---------------------------------------------------------------------
@@ -71,7 +183,7 @@ class FmuInstance:
 
     def errors(self) -> list[str]:
         """Messages logged with Error or Fatal status (what went wrong, in the FMU's words)."""
-        return [m for s, _, m in self.messages if s in ("Error", "Fatal")]
+        return [" ".join(m.split()) for s, _, m in self.messages if s in ("Error", "Fatal")]
 
     def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
         try:
@@ -205,11 +317,21 @@ class FmuInstance:
 
         After fmi2Fatal the standard allows no further call, so the instance is left alone (with
         pythonfmu 0.7, freeing it then releases Python objects twice and crashes the process
-        later)."""
+        later). Its library then stays loaded, so its extraction folder is kept (a second copy of
+        a pythonfmu library loaded from a new folder corrupts the heap) until the process exits."""
         if self._alive:
             self._alive = False
-            if not self.fatal:
-                self.slave.freeInstance()
+            if self.fatal:
+                self._extraction = None  # still in use: never pruned, removed at exit
+                return
+            self.slave.freeInstance()
+        self._release()
+
+    def _release(self) -> None:
+        """Give back the extraction folder (see _Extractions)."""
+        key, self._extraction = getattr(self, "_extraction", None), None
+        if key is not None:
+            _extractions.release(key)
 
 
 def fmi_value(kind: str, value: Any, name: str) -> Any:
@@ -221,7 +343,11 @@ def fmi_value(kind: str, value: Any, name: str) -> Any:
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, float) and not value.is_integer():
                 raise ValueError(value)
-            return int(value)
+            number = int(value)
+            if not INT32[0] <= number <= INT32[1]:
+                raise ValueError(f"variable {name}: {value!r} is beyond the 32-bit range of an"
+                                 f" FMI {kind} ({INT32[0]} .. {INT32[1]})")  # fmt: skip
+            return number
         if kind == "Boolean":
             if isinstance(value, str):
                 text = value.strip().lower()
@@ -230,5 +356,7 @@ def fmi_value(kind: str, value: Any, name: str) -> Any:
                 return text in ("true", "1")
             return bool(value)
         return str(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError) as exc:
+        if str(exc).startswith("variable "):
+            raise
         raise ValueError(f"variable {name}: {value!r} is not a valid {kind}") from None

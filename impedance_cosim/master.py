@@ -21,23 +21,29 @@
 - Every FMI status is checked. A failing FMU, a non-finite value or a value beyond
   `divergence_limit` stops the run with a message naming the signal and time; the rows computed so
   far are kept in the result.
+- Rows reach an optional sink as they are computed (results.py writes them to a CSV); SIGINT or
+  SIGTERM stops a run between blocks of steps and raises RunInterrupted with the rows so far
+  (interrupt.py). A run whose rows would not fit in memory is refused before it starts.
 """
 
 from __future__ import annotations
 
 import ctypes
 import gc
+import math
 import sys
 import time as wallclock
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
 from impedance_cosim import fastloop
-from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, fmi_value
+from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, check_fmu, fmi_value
+from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
+from impedance_cosim.results import Feed, Sink, size_problem
 from impedance_cosim.ssp import SspError, SystemDescription
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
@@ -83,6 +89,13 @@ def split_name(name: str) -> tuple[str, str]:
     return comp, var
 
 
+def real_outputs(description: Any) -> list[str]:
+    """Names of an FMU's Real outputs, in model order (the recorded signals)."""
+    return [
+        v.name for v in description.modelVariables if v.causality == "output" and v.type == "Real"
+    ]
+
+
 def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list[str]:
     """How an FMU's variables (name -> fmpy ScalarVariable) differ from a component's SSD
     connectors: a missing variable, another causality, type or unit (one line each)."""
@@ -108,10 +121,7 @@ class _Slot:
     def __init__(self, name: str, fmu: FmuInstance) -> None:
         self.name = name
         self.fmu = fmu
-        self.outputs = [
-            v.name for v in fmu.description.modelVariables
-            if v.causality == "output" and v.type == "Real"
-        ]  # fmt: skip
+        self.outputs = real_outputs(fmu.description)
         self.read = fmu.real_getter(self.outputs)
         self.values: list[float] = []
         self.inputs: list[str] = []
@@ -139,14 +149,17 @@ class Master:
         self.algorithm = algorithm or system.algorithm or "gauss-seidel"
         if self.algorithm not in ALGORITHMS:
             raise MasterError(f"algorithm must be one of {ALGORITHMS} (got {self.algorithm!r})")
-        self.step_size = step_size or system.step_size
-        if not self.step_size or not self.step_size > 0:
-            raise MasterError(f"step size must be > 0 (got {self.step_size})")
+        self.step_size = step_size if step_size is not None else system.step_size
+        if self.step_size is None or not 0 < self.step_size < math.inf:
+            raise MasterError(f"step size must be a finite number > 0 (got {self.step_size})")
         self.start_time = system.start_time
         self.stop_time = stop_time if stop_time is not None else system.stop_time
-        if self.stop_time is None or not self.stop_time > self.start_time:
-            raise MasterError(f"stop time must be > start time (got {self.stop_time})")
+        if self.stop_time is None or not self.start_time < self.stop_time < math.inf:
+            raise MasterError(f"stop time must be finite and > start time (got {self.stop_time})")
         steps = (self.stop_time - self.start_time) / self.step_size
+        if not math.isfinite(steps):
+            raise MasterError(f"stop time {self.stop_time:g} s at step {self.step_size:g} s is too"
+                              " many steps")  # fmt: skip
         if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
             raise MasterError(
                 f"the run length {self.stop_time - self.start_time:g} s is not a whole number of"
@@ -174,6 +187,11 @@ class Master:
                 raise MasterError(f"no component {name!r} to replace (have {names})")
             self.fmu_files[name] = Path(path)
         self.parameters = self._collect_parameters(overrides or {})
+        columns = 1 + sum(len(real_outputs(md)) for md in self.descriptions.values())
+        columns += len(RT_COLUMNS) if realtime else 0
+        too_big = size_problem(int(round(steps)), columns, self.stop_time, self.step_size)
+        if too_big:
+            raise MasterError(too_big)
 
     # --- configuration checks -------------------------------------------------------------------
 
@@ -189,6 +207,10 @@ class Master:
                 self.descriptions[name] = read_model_description(str(path))
             except Exception as exc:
                 raise MasterError(f"component {name}: cannot read {path.name}: {exc}") from None
+            try:
+                check_fmu(path, self.descriptions[name])
+            except FmuError as exc:
+                raise MasterError(f"component {name}: {exc}") from None
         variables = {
             name: {v.name: v for v in md.modelVariables} for name, md in self.descriptions.items()
         }
@@ -242,30 +264,46 @@ class Master:
 
     # --- run ------------------------------------------------------------------------------------
 
-    def run(self, progress: bool = False) -> RunResult:
-        """Run the system; never raises for a failure during the run (see RunResult.error)."""
-        slots = {name: _Slot(name, FmuInstance(self.fmu_files[name], name)) for name in self.order}
-        ordered = [slots[n] for n in self.order]
-        index = {s.name: i for i, s in enumerate(ordered)}
-        for se, sc, ee, ec in self.system.connections:
-            dst = slots[ee]
-            dst.inputs.append(ec)
-            dst.sources.append((index[se], slots[se].outputs.index(sc)))
-        for s in ordered:
-            s.write = s.fmu.real_setter(s.inputs)
-        names = ["time", *(f"{s.name}.{o}" for s in ordered for o in s.outputs)]
+    def run(self, progress: bool | TextIO = False, sink: Sink | None = None) -> RunResult:
+        """Run the system; never raises for a failure during the run (see RunResult.error).
+
+        progress: a progress bar on stderr (or on the stream given). sink(names, rows), if given,
+        gets the header (no rows) first, then each block of rows as it is computed (all at the
+        end in real time), on every exit path. The first SIGINT or SIGTERM stops the run after
+        the block under way: RunInterrupted, carrying the rows so far, is raised once the FMUs
+        are freed (see interrupt.py)."""
+        with StopSignals() as stop:
+            result = self._run(progress, sink, stop)
+        if stop.signum is not None:
+            t = result.data[-1, 0] if len(result.data) else self.start_time
+            result.error = f"interrupted by {signal_name(stop.signum)} at t={t:.9g} s"
+            result.info["interrupted"] = stop.signum
+            raise RunInterrupted(result.error, stop.signum, result)
+        return result
+
+    def _run(self, progress: bool | TextIO, sink: Sink | None, stop: StopSignals) -> RunResult:
+        outputs = {n: real_outputs(self.descriptions[n]) for n in self.order}
+        names = ["time", *(f"{n}.{o}" for n in self.order for o in outputs[n])]
+        record = [*names, *RT_COLUMNS] if self.realtime else names
         h, t0 = self.step_size, self.start_time
         n = int(round((self.stop_time - t0) / h))
         data = np.empty((n + 1, len(names)))
         rows, error = 0, None
-        timing = None
+        timing = np.zeros((n + 1, len(RT_COLUMNS))) if self.realtime else None
         info: dict[str, Any] = {}
+        feed = Feed(sink, record)
+        feed(data, rows, timing)
         started = wallclock.perf_counter()
-        bar = _Progress(n, h) if progress else None
+        bar = _Progress(n, h, sys.stderr if progress is True else progress) if progress else None
+        ordered: list[_Slot] = []
         try:
+            for name in self.order:
+                ordered.append(_Slot(name, FmuInstance(self.fmu_files[name], name)))
+            self._wire(ordered)
             self._initialize(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
+            feed(data, rows, timing)
             error = self._check_row(names, data[0], t0)
             fast = fastloop.load() if self.loop != "python" else None
             if self.loop == "c" and fast is None:
@@ -273,18 +311,18 @@ class Master:
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
-                timing = np.zeros((n + 1, len(RT_COLUMNS)))
-                rows, error = self._realtime_steps(step, ordered, data, names, timing, bar)
+                rows, error = self._realtime_steps(step, ordered, data, names, timing, bar, stop)
                 info["realtime"] = realtime_stats(timing[1:rows], h)
-            while not error and rows < n + 1:
+            while not error and rows < n + 1 and stop.signum is None:
                 chunk = min(n + 1 - rows, CHUNK)
                 done, error = step(ordered, data, names, rows - 1, chunk)
                 rows += done
+                feed(data, rows, timing)
                 if bar:
                     bar.update(rows - 1)
             info["stepping_s"] = wallclock.perf_counter() - stepping
             info["loop"] = "c" if fast else "python"
-        except (FmuError, SspError, ValueError, KeyError) as exc:
+        except (FmuError, MasterError, SspError, ValueError, KeyError) as exc:
             error = str(exc)
         finally:
             if bar:
@@ -295,11 +333,11 @@ class Master:
                 except FmuError:
                     pass
                 s.fmu.free()
+            feed(data, rows, timing)
         data = data[:rows]
         if self.realtime:
-            names = [*names, *RT_COLUMNS]
-            rt = timing[:rows] if timing is not None else np.zeros((rows, len(RT_COLUMNS)))
-            data = np.hstack((data, rt))
+            names = record
+            data = np.hstack((data, timing[:rows]))
         return RunResult(
             names=names,
             data=data,
@@ -311,7 +349,19 @@ class Master:
             info=info,
         )
 
-    def _realtime_steps(self, step, ordered, data, names, timing, bar) -> tuple[int, str | None]:
+    def _wire(self, ordered: list[_Slot]) -> None:
+        """Each component's inputs: the (component, output) that feeds it, per the SSD."""
+        index = {s.name: i for i, s in enumerate(ordered)}
+        for se, sc, ee, ec in self.system.connections:
+            dst = ordered[index[ee]]
+            dst.inputs.append(ec)
+            dst.sources.append((index[se], ordered[index[se]].outputs.index(sc)))
+        for s in ordered:
+            s.write = s.fmu.real_setter(s.inputs)
+
+    def _realtime_steps(
+        self, step, ordered, data, names, timing, bar, stop
+    ) -> tuple[int, str | None]:
         """All steps one at a time, each started at its wall-clock time (see module docstring);
         fills timing[i + 1] for step i; returns (rows filled, error or None)."""
         h, n = self.step_size, len(data) - 1
@@ -322,6 +372,8 @@ class Master:
         try:
             t_wall0 = clock()
             for i in range(n):
+                if stop.signum is not None:
+                    break
                 scheduled = t_wall0 + i * h
                 remaining = scheduled - clock()
                 if remaining > SPIN_S:
@@ -458,10 +510,7 @@ class Master:
         if not bad.any():
             return None
         k = int(np.argmax(bad))
-        return (
-            f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g}"
-            f" (limit {self.divergence_limit:g}); results kept up to there"
-        )
+        return f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g} (limit {self.divergence_limit:g})"
 
 
 def realtime_stats(timing: np.ndarray, h: float) -> dict[str, Any]:
@@ -504,8 +553,8 @@ def format_realtime(stats: dict[str, Any]) -> str:
 class _Progress:
     """A one-line progress bar on stderr, shown once a run has taken more than a second."""
 
-    def __init__(self, steps: int, h: float) -> None:
-        self.steps, self.h = steps, h
+    def __init__(self, steps: int, h: float, stream: TextIO) -> None:
+        self.steps, self.h, self.stream = steps, h, stream
         self.start = wallclock.perf_counter()
         self.last = 0.0
         self.shown = False
@@ -518,11 +567,11 @@ class _Progress:
         frac = i / self.steps
         bar = "#" * int(30 * frac)
         rtf = i * self.h / now
-        sys.stderr.write(
+        self.stream.write(
             f"\r[{bar:<30}] {100 * frac:5.1f}%  t={i * self.h:7.2f} s  {rtf:6.1f}x real time"
         )
-        sys.stderr.flush()
+        self.stream.flush()
 
     def close(self) -> None:
         if self.shown:
-            sys.stderr.write("\n")
+            self.stream.write("\n")

@@ -40,9 +40,9 @@ def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
     args = ["run", "--ssp", str(ssp_path), "--stop", "5", "--out", str(out), "--set"]
     assert main([*args, "controller.G=1e9"]) == 1
     err = capsys.readouterr().err
-    assert "error:" in err and "partial results kept" in err
+    assert len(err.splitlines()) == 1 and "error:" in err
     rows = read_csv(out / "observer.csv")
-    assert 2 < len(rows) < 2001
+    assert 2 < len(rows) < 2001 and f"{len(rows)} rows kept in {out / 'observer.csv'}" in err
 
 
 @pytest.mark.parametrize(
@@ -51,11 +51,14 @@ def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
         (["--set", "controller.Kx=3"], "unknown parameter controller.Kx"),
         (["--set", "controller.K1"], "--set expects component.variable=value"),
         (["--scenario", "fast"], "no parameter set 'fast'"),
-        (["--step", "-1"], "step size must be > 0"),
+        (["--step", "-1"], "argument --step: must be a finite number > 0"),
     ],
 )
 def test_bad_options_give_one_line_errors(ssp_path, tmp_path, capsys, args, message):
-    assert main(["run", "--ssp", str(ssp_path), "--out", str(tmp_path), *args]) == 2
+    try:
+        assert main(["run", "--ssp", str(ssp_path), "--out", str(tmp_path), *args]) == 2
+    except SystemExit as exc:  # argparse's own checks
+        assert exc.code == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
 
@@ -71,3 +74,38 @@ def test_malformed_ssd_gives_a_one_line_error(ssp_path, tmp_path, capsys):
     assert main(["run", "--ssp", str(bad), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "malformed SSD" in err and len(err.splitlines()) == 1
+
+
+def test_a_command_fails_when_any_of_its_runs_fails(ssp_path, tmp_path, capsys, monkeypatch):
+    """`run` with figures also runs the other scenario of Fig. 4: its failure fails the command."""
+    from impedance_cosim.master import Master
+
+    original = Master.run
+
+    def run(self, *args, **kwargs):
+        result = original(self, *args, **kwargs)
+        if self.parameter_set == "difference":
+            result.error = "made to fail by the test"
+        return result
+
+    monkeypatch.setattr(Master, "run", run)
+    out = tmp_path / "res"
+    assert main(["run", "--ssp", str(ssp_path), "--stop", "0.5", "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "difference: made to fail by the test" in err[0]
+    assert (out / "observer.csv").is_file() and (out / "difference.csv").is_file()
+
+
+def test_results_csv_appears_only_when_closed(tmp_path):
+    """The CSV is written under a temporary name and renamed into place when the stream closes
+    (also on an exception), so the target name never holds a partial file."""
+    from impedance_cosim.results import CsvStream
+
+    path = tmp_path / "r.csv"
+    with pytest.raises(RuntimeError), CsvStream(path) as stream:
+        stream.write(["time", "x"], np.zeros((0, 2)))
+        stream.write(["time", "x"], np.array([[0.0, 0.1], [0.5, 1 / 3]]))
+        assert not path.exists() and len(list(tmp_path.glob(".r.csv.*.tmp"))) == 1
+        raise RuntimeError("stop")
+    assert path.read_text() == f"time,x\n0.0,0.1\n0.5,{1 / 3!r}\n"
+    assert list(tmp_path.iterdir()) == [path]

@@ -122,6 +122,20 @@ def same(a: list[dict], b: list[dict]) -> bool:
     )
 
 
+def cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time used so far by these processes (psutil)."""
+    import psutil
+
+    return sum(sum(psutil.Process(pid).cpu_times()[:2]) for pid in pids)
+
+
+def timed(fn, pids: list[int]) -> tuple[float, float, object]:
+    """(wall s, CPU s of pids, result) of fn()."""
+    cpu, start = cpu_seconds(pids), time.perf_counter()
+    result = fn()
+    return time.perf_counter() - start, cpu_seconds(pids) - cpu, result
+
+
 def run_plans(plans, client=None, **kwargs) -> list[dict]:
     rows = []
     for plan in plans:
@@ -133,44 +147,38 @@ def run_plans(plans, client=None, **kwargs) -> list[dict]:
 
 
 def sweep_table(cases: dict[str, list], workers: int, external: bool) -> None:
-    print(f"\nsweeps: {os.cpu_count()} cores, {workers} single-threaded workers")
-    head = ("case", "runs", "serial s", "Local+start s", "x", "Local s", "x", "external s", "x")
+    print(f"\nsweeps: {os.cpu_count()} cores, {workers} single-threaded workers; CPU s = CPU "
+          "time of this process and the workers during the sweep (its ratio to serial: what the "
+          "speed-up would be on free cores, less the waiting)")  # fmt: skip
+    head = ("case", "runs", "serial s", "Local+start s", "x", "Local s", "x", "CPU s", "external s",
+            "x", "CPU s")  # fmt: skip
     print(f"{head[0]:26} {head[1]:>4} " + " ".join(f"{h:>13}" for h in head[2:]))
+    me = [os.getpid()]
     for name, plans in cases.items():
         for plan in plans[:1]:  # warm this process (library loads, compiled loop)
             sweep.run_serial(sweep.Plan(plan.ssp, plan.axes, plan.points[:1], plan.options))
-        start = time.perf_counter()
-        serial = run_plans(plans)
-        t_serial = time.perf_counter() - start
+        t_serial, cpu_serial, serial = timed(lambda plans=plans: run_plans(plans), me)
         start = time.perf_counter()
         with sweep.dask_client(workers=workers) as client:
             rows = run_plans(plans, client)  # workers just started: they load everything
             t_with_start = time.perf_counter() - start
-            t_started = time.perf_counter()
-            warm = run_plans(plans, client)  # a running cluster, warmed by the first sweep
-            t_local = time.perf_counter() - t_started
+            pids = me + list(client.run(os.getpid).values())
+            t_local, cpu_local, warm = timed(lambda c=client, p=plans: run_plans(p, c), pids)
             assert same(serial, warm), f"{name}: LocalCluster table differs from serial"
-            extra = ""
-            if name.startswith("native, 64"):  # the same on tasks of one run each (before)
-                t1 = time.perf_counter()
-                single = run_plans(plans, client, target_s=0.0)
-                t_single = time.perf_counter() - t1
-                assert same(serial, single), f"{name}: one run per task differs from serial"
-                extra = f"  (one run per task: {t_single:.2f} s, {t_serial / t_single:.2f}x)"
         assert same(serial, rows), f"{name}: LocalCluster table differs from serial"
-        t_ext = None
+        ext = f"{'-':>13} {'-':>13} {'-':>13}"
         if external:
             with external_cluster(workers) as (address, _), sweep.dask_client(address) as client:
                 run_plans(plans[:1], client)  # the workers read the system once
-                start = time.perf_counter()
-                ext_rows = run_plans(plans, client)
-                t_ext = time.perf_counter() - start
+                pids = me + list(client.run(os.getpid).values())
+                t_ext, cpu_ext, ext_rows = timed(lambda c=client, p=plans: run_plans(p, c), pids)
             assert same(serial, ext_rows), f"{name}: external cluster table differs from serial"
-        ext = f"{t_ext:13.2f} {t_serial / t_ext:12.2f}x" if t_ext else f"{'-':>13} {'-':>13}"
+            ext = f"{t_ext:13.2f} {t_serial / t_ext:12.2f}x {cpu_ext:13.2f}"
         print(
             f"{name:26} {len(serial):4d} {t_serial:13.2f} {t_with_start:13.2f} "
             f"{t_serial / t_with_start:12.2f}x {t_local:13.2f} {t_serial / t_local:12.2f}x "
-            f"{ext}{extra}"
+            f"{cpu_local:13.2f} {ext}   (serial CPU {cpu_serial:.2f} s)",
+            flush=True,
         )
 
 

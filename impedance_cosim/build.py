@@ -297,4 +297,7 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
         built.append(build_ssp(out_dir))
         if native:
             built.append(build_ssp(out_dir, "PaperScenario-native", Path(out_dir) / "native"))
+            from impedance_cosim.build3 import build_fmi3  # the FMI 3.0 edition (fmus/fmi3/)
+
+            built += build_fmi3(out_dir)
     return built

@@ -1,0 +1,128 @@
+"""Build the FMI 3.0 edition of the native FMUs into fmus/fmi3/, and its system archive.
+
+The same model code (native/<model>/model.c, config.h) and the same variable tables as the FMI 2.0
+native FMUs; the glue is native/src/fmi3_glue.c, which includes the FMI 2 layer (fmi2_glue.c,
+fmi2_me.c) under internal names. The FMUs:
+- PumaPlant.fmu: Co-Simulation and Model Exchange;
+- ImpedanceController.fmu: Co-Simulation (and Model Exchange), no clock: for any FMI 3 host;
+- ImpedanceControllerClocked.fmu: Scheduled Execution, its sampling as a periodic input clock
+  (`sample_clock`, interval = the parameter sample_period), for hosts that schedule clocks.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import impedance_cosim
+from impedance_cosim import toolchains
+from impedance_cosim.atomic import temp_path
+from impedance_cosim.build import (
+    DEFAULT_OUT,
+    FMUS,
+    NATIVE,
+    FmuSpec,
+    _add_documentation,
+    _info,
+    _native_sources,
+    build_ssp,
+)
+from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
+
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+# compiled into the FMI 3 binary by inclusion from fmi3_glue.c, not on their own
+INCLUDED = ("fmi2_glue.c", "fmi2_me.c")
+SAMPLE_CLOCK = SampleClock(
+    "sample_clock",
+    "sample_period",
+    "The controller's sampling: periodic, one tick every sample_period seconds from the start"
+    " time; at each tick the observer and the control law take a sample of the inputs",
+)
+CLOCKED_NAME = "ImpedanceControllerClocked"  # file name of the clocked controller
+
+
+def _xml(cls, token: str, clock: SampleClock | None) -> bytes:
+    return model_description3(
+        model_name=cls.MODEL_NAME,
+        description=cls.DESCRIPTION,
+        token=token,
+        variables=cls.variables(),
+        default_experiment=cls.DEFAULT_EXPERIMENT,
+        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (native C99, FMI 3.0)",
+        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+        model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
+        clock=clock,
+    )
+
+
+def build_native_fmu3(
+    spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3", clock: SampleClock | None = None
+) -> Path:
+    """Build the FMI 3.0 native FMU of a model (with clock: its Scheduled Execution variant)."""
+    import fmpy
+
+    cls = spec.load_model_class()
+    me = getattr(cls, "MODEL_EXCHANGE", None)
+    sources = _native_sources(spec)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    for name in FMI3_HEADERS:
+        sources[name] = (headers / name).read_bytes()
+    sources["fmi3_glue.c"] = (NATIVE / "src" / "fmi3_glue.c").read_bytes()
+    sources["fmi2_hidden.h"] = (NATIVE / "src" / "fmi2_hidden.h").read_bytes()
+    n_table = len(full_table(cls.variables(), me))
+    sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables()).encode()
+    c_files = sorted(n for n in sources if n.endswith(".c") and n not in INCLUDED)
+    digest = hashlib.sha256(_xml(cls, "", clock))
+    for name in sorted(sources):
+        digest.update(name.encode() + sources[name])
+    token = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
+    sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
+    sources["buildDescription.xml"] = _build_description3(cls.MODEL_NAME, c_files)
+    xml = _xml(cls, token, clock)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="impcosim_fmi3_") as tmp:
+        src = Path(tmp) / "sources"
+        src.mkdir()
+        for name, content in sources.items():
+            (src / name).write_bytes(content)
+        binaries = toolchains.build_binaries(src, cls.MODEL_NAME, c_files, fmi_version=3)
+        target = out_dir / f"{CLOCKED_NAME if clock else cls.MODEL_NAME}.fmu"
+        tmp_target = temp_path(target)
+        with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr(_info("modelDescription.xml"), xml)
+            for name in sorted(binaries):
+                z.writestr(_info(name, 0o755), binaries[name])
+            for name in sorted(sources):
+                z.writestr(_info(f"sources/{name}"), sources[name])
+            _add_documentation(z, xml, "native C99")
+        tmp_target.replace(target)
+    return target
+
+
+def _build_description3(model_identifier: str, c_files: list[str]) -> bytes:
+    root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
+    conf = ET.SubElement(root, "BuildConfiguration", {"modelIdentifier": model_identifier})
+    files = ET.SubElement(conf, "SourceFileSet", {"language": "C99"})
+    for name in c_files:
+        ET.SubElement(files, "SourceFile", {"name": name})
+    ET.SubElement(conf, "Library", {"name": "m"})
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
+    """fmus/fmi3/: the FMI 3.0 plant and controllers, and PaperScenario-fmi3.ssp (the SSD of the
+    FMI 2.0 archive, with the FMI 3.0 plant and clock-free controller)."""
+    folder = Path(out_dir) / "fmi3"
+    built = [
+        build_native_fmu3(FMUS["plant"], folder),
+        build_native_fmu3(FMUS["controller"], folder),
+        build_native_fmu3(FMUS["controller"], folder, SAMPLE_CLOCK),
+    ]
+    built.append(build_ssp(out_dir, "PaperScenario-fmi3", folder))
+    return built

@@ -2,19 +2,39 @@
  * host.c): it loads two FMU libraries, wires them, initializes them (exchanging initial values)
  * and runs a Gauss-Seidel loop (first FMU first), writing recorded Float64 values as CSV. Half-way
  * it saves each FMU's state, serializes it, deserializes it into a new state and restores that
- * (so the state functions run under valgrind too). Used by tests/test_fmi3_robustness.py.
+ * (so the state functions run under valgrind too). Used by tests/test_fmi3_robustness.py and,
+ * cross-compiled for win64 (wine) and aarch64 Linux (qemu), tests/test_fmi3_platforms.py.
  *
  * usage: host3 A.so TOKEN_A B.so TOKEN_B STEPS H OUT.csv CONNECTIONS RECORD
  *   CONNECTIONS  comma-separated "A12>B34" (output vr 12 of A feeds input vr 34 of B)
  *   RECORD       comma-separated Float64 variables to record, e.g. "A53,B55"
  *   H            the step size, a number or a ratio such as "1/400"
  */
-#include <dlfcn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi3Functions.h"
+
+#ifdef _WIN32
+#include <windows.h>
+static void *open_library(const char *path) { return (void *)LoadLibraryA(path); }
+static void *library_symbol(void *lib, const char *name)
+{
+    FARPROC f = GetProcAddress((HMODULE)lib, name);
+    void *p;
+    memcpy(&p, &f, sizeof p); /* function pointer to void *, as dlsym returns it */
+    return p;
+}
+static void close_library(void *lib) { FreeLibrary((HMODULE)lib); }
+static const char *library_error(void) { return "LoadLibrary failed"; }
+#else
+#include <dlfcn.h>
+static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void *library_symbol(void *lib, const char *name) { return dlsym(lib, name); }
+static void close_library(void *lib) { dlclose(lib); }
+static const char *library_error(void) { return dlerror(); }
+#endif
 
 #define MAX_LINKS 64
 
@@ -51,7 +71,7 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
 
 static void *sym(void *lib, const char *name)
 {
-    void *f = dlsym(lib, name);
+    void *f = library_symbol(lib, name);
     if (!f) {
         fprintf(stderr, "missing symbol %s\n", name);
         exit(2);
@@ -61,9 +81,9 @@ static void *sym(void *lib, const char *name)
 
 static void load(Fmu *f, const char *path)
 {
-    f->lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    f->lib = open_library(path);
     if (!f->lib) {
-        fprintf(stderr, "loading %s: %s\n", path, dlerror());
+        fprintf(stderr, "loading %s: %s\n", path, library_error());
         exit(2);
     }
     f->instantiate = (fmi3InstantiateCoSimulationTYPE *)sym(f->lib, "fmi3InstantiateCoSimulation");
@@ -214,7 +234,7 @@ int main(int argc, char **argv)
     for (int k = 0; k < 2; k++) {
         check(fmus[k].terminate(fmus[k].c), "fmi3Terminate");
         fmus[k].free_instance(fmus[k].c);
-        dlclose(fmus[k].lib);
+        close_library(fmus[k].lib);
     }
     return 0;
 }

@@ -43,9 +43,12 @@ SAMPLE_CLOCK = SampleClock(
     " time; at each tick the observer and the control law take a sample of the inputs",
 )
 CLOCKED_NAME = "ImpedanceControllerClocked"  # file name of the clocked controller
+# models whose co-simulation returns early at a discrete-state switch when the importer allows it
+# (model.c implements model_step_early): the plant, at the wall contact
+EARLY_RETURN = {"plant"}
 
 
-def _xml(cls, token: str, clock: SampleClock | None) -> bytes:
+def _xml(cls, token: str, clock: SampleClock | None, early: bool) -> bytes:
     return model_description3(
         model_name=cls.MODEL_NAME,
         description=cls.DESCRIPTION,
@@ -56,6 +59,7 @@ def _xml(cls, token: str, clock: SampleClock | None) -> bytes:
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
         clock=clock,
+        early_return=early,
     )
 
 
@@ -67,6 +71,7 @@ def build_native_fmu3(
 
     cls = spec.load_model_class()
     me = getattr(cls, "MODEL_EXCHANGE", None)
+    early = spec.key in EARLY_RETURN and clock is None
     sources = _native_sources(spec)
     headers = Path(fmpy.__file__).parent / "c-code"
     for name in FMI3_HEADERS:
@@ -74,15 +79,15 @@ def build_native_fmu3(
     sources["fmi3_glue.c"] = (NATIVE / "src" / "fmi3_glue.c").read_bytes()
     sources["fmi2_hidden.h"] = (NATIVE / "src" / "fmi2_hidden.h").read_bytes()
     n_table = len(full_table(cls.variables(), me))
-    sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables()).encode()
+    sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables(), early).encode()
     c_files = sorted(n for n in sources if n.endswith(".c") and n not in INCLUDED)
-    digest = hashlib.sha256(_xml(cls, "", clock))
+    digest = hashlib.sha256(_xml(cls, "", clock, early))
     for name in sorted(sources):
         digest.update(name.encode() + sources[name])
     token = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
     sources["buildDescription.xml"] = _build_description3(cls.MODEL_NAME, c_files)
-    xml = _xml(cls, token, clock)
+    xml = _xml(cls, token, clock, early)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="impcosim_fmi3_") as tmp:

@@ -287,3 +287,49 @@ def test_ecospy_runs_the_fmi3_archive_as_our_jacobi_master(fmu_dir, fmi2_and_fmi
         scale = np.abs(ours[name]).max()
         assert np.abs(theirs[:, k] - ours[name]).max() <= 1e-12 * max(scale, 1.0), name
     assert ours["plant.contact_force"].max() > 1.0
+
+
+# --- early return at the wall contact ----------------------------------------------------------
+
+
+def test_plant_returns_early_at_the_contact_when_allowed(fmi3_dir):
+    """With earlyReturnAllowed, fmi3DoStep stops at each contact switch (closing and opening)
+    with the wrist on the wall; the importer completes the step from there and ends where the
+    plant without early return ends, bit for bit. Without it the plant never returns early."""
+    from conftest import contact_torques
+
+    path = fmi3_dir / PLANT
+    assert _root(path).find("CoSimulation").get("mightReturnEarlyFromDoStep") == "true"
+    root = _root(fmi3_dir / CONTROLLER)
+    assert root.find("CoSimulation").get("mightReturnEarlyFromDoStep") == "false"
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    plain, early = (
+        FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier="PumaPlant",
+                  instanceName=f"p{k}") for k in (0, 1)
+    )  # fmt: skip
+    plain.instantiate(earlyReturnAllowed=False)
+    early.instantiate(earlyReturnAllowed=True)
+    for fmu in (plain, early):
+        fmu.enterInitializationMode(startTime=0.0)
+        fmu.exitInitializationMode()
+    taus, stops, states = [vr[f"tau{i}"] for i in (1, 2, 3)], [], []
+    for i, tau in enumerate(contact_torques(6.0)):
+        t = i * DT
+        for fmu in (plain, early):
+            fmu.setFloat64(taus, list(tau))
+        assert plain.doStep(t, DT)[2] is False
+        _, _, returned_early, reached = early.doStep(t, DT)
+        if returned_early:
+            assert t < reached < t + DT
+            x, now = early.getFloat64([vr["x"], vr["time"]])
+            stops.append((reached, x - 0.65, now))
+            assert early.doStep(reached, t + DT - reached)[2:] == (False, t + DT)
+    assert len(stops) == 4  # two contacts: each closes and opens
+    assert all(abs(gap) < 1e-9 and now == reached for reached, gap, now in stops)
+    names = ["q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3", "contact_force"]
+    states = [fmu.getFloat64([vr[n] for n in names]) for fmu in (plain, early)]
+    assert states[0] == states[1]
+    for fmu in (plain, early):
+        fmu.terminate()
+        fmu.freeInstance()

@@ -69,10 +69,12 @@ def model_description3(
     output_dependencies: str | None = None,
     model_exchange: ModelExchange | None = None,
     clock: SampleClock | None = None,
+    early_return: bool = False,
 ) -> bytes:
     """Complete FMI 3.0 modelDescription.xml: Co-Simulation (without event mode) and, with
     model_exchange, Model Exchange; with clock, Scheduled Execution instead of both, the model's
-    inputs and outputs then clocked by it. output_dependencies as in the FMI 2.0 writer."""
+    inputs and outputs then clocked by it. output_dependencies as in the FMI 2.0 writer;
+    early_return: fmi3DoStep may return early (at the plant's contact) if the importer allows."""
     table = full_table(variables, model_exchange)
     ext = extras(len(table), model_exchange, clock)
     vr_of = {v.name: vr for vr, v in enumerate(table)}
@@ -112,6 +114,7 @@ def model_description3(
                 **common,
                 "canHandleVariableCommunicationStepSize": "true",
                 "hasEventMode": "false",
+                "mightReturnEarlyFromDoStep": _fmt(early_return),
                 "providesIntermediateUpdate": "false",
                 "canReturnEarlyAfterIntermediateUpdate": "false",
             },
@@ -218,7 +221,7 @@ def model_description3(
 
 
 def c_config3(n_table: int, model_exchange: ModelExchange | None, clock: SampleClock | None,
-              variables: list[Variable]) -> str:  # fmt: skip
+              variables: list[Variable], early_return: bool = False) -> str:  # fmt: skip
     """fmi3_config.h for the FMI 3 glue: the value references of the FMI 3-only variables."""
     ext = extras(n_table, model_exchange, clock)
     lines = [
@@ -226,6 +229,7 @@ def c_config3(n_table: int, model_exchange: ModelExchange | None, clock: SampleC
         f"#define VR_TIME {ext.time}",
         f"#define VR_INDICATOR {ext.indicators[0] if ext.indicators else n_table + 1}",
         f"#define HAS_CLOCK {1 if clock else 0}",
+        f"#define HAS_EARLY_RETURN {1 if early_return else 0}",
     ]
     if clock:
         names = [v.name for v in variables]

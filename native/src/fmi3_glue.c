@@ -13,6 +13,7 @@
  * under FMI 2.0, so a host without clock support runs it unchanged.
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -20,10 +21,18 @@
 #include "fmi3Functions.h"
 #include "fmi2_hidden.h" /* before the FMI 2 layer: its functions become internal */
 
+#define model_step model_step_fmi3 /* fmi2DoStep steps through model_step_fmi3 (below) */
 #include "fmi2_glue.c"
 #include "fmi2_me.c"
+#undef model_step
+int model_step(Data *d, double t, double h, char *msg);
 
-#include "fmi3_config.h" /* VR_TIME; HAS_CLOCK, VR_CLOCK, CLOCK_PERIOD_VR: written by the build */
+/* VR_TIME, VR_INDICATOR; HAS_CLOCK, VR_CLOCK, CLOCK_PERIOD_VR; HAS_EARLY_RETURN (the build) */
+#include "fmi3_config.h"
+#if HAS_EARLY_RETURN
+/* model.c: model_step that stops at the first discrete-state switch inside the step */
+int model_step_early(Data *d, double t, double h, double *reached, char *msg);
+#endif
 
 #ifndef MODEL_EXCHANGE
 #error "the FMI 3 layer needs the model's Model Exchange side (config.h: MODEL_EXCHANGE)"
@@ -39,7 +48,25 @@ typedef struct {
     Kind kind;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
+    int early_return; /* co-simulation: the importer allows early return, the model offers it */
+    double reached;   /* where the last model step stopped */
 } Wrapper;
+
+/* The model step fmi2DoStep takes (d is inst->s.d of an instance whose logger environment is
+ * its Wrapper): the model's own, or, where early return is on, one that stops at an event. */
+int model_step_fmi3(Data *d, double t, double h, char *msg)
+{
+    const Instance *inst =
+        (const Instance *)((const char *)d - offsetof(Instance, s) - offsetof(Snapshot, d));
+    Wrapper *w = (Wrapper *)inst->cb.componentEnvironment;
+#if HAS_EARLY_RETURN
+    if (w->early_return) {
+        return model_step_early(d, t, h, &w->reached, msg);
+    }
+#endif
+    w->reached = t + h;
+    return model_step(d, t, h, msg);
+}
 
 /* FMI 2 function names in the inner layer's messages, as the FMI 3 host knows them. */
 static const char *const RENAMES[][2] = {
@@ -186,8 +213,8 @@ fmi3Instance fmi3InstantiateCoSimulation(
     size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    (void)resourcePath, (void)earlyReturnAllowed, (void)requiredIntermediateVariables,
-        (void)intermediateUpdate;
+    Wrapper *w;
+    (void)resourcePath, (void)requiredIntermediateVariables, (void)intermediateUpdate;
     if (eventModeUsed || nRequiredIntermediateVariables > 0) {
         if (logMessage) {
             logMessage(instanceEnvironment, fmi3Error, "logStatusError",
@@ -197,8 +224,12 @@ fmi3Instance fmi3InstantiateCoSimulation(
         }
         return NULL;
     }
-    return instantiate(K_CS, instanceName, instantiationToken, visible, loggingOn,
-                       instanceEnvironment, logMessage);
+    w = instantiate(K_CS, instanceName, instantiationToken, visible, loggingOn,
+                    instanceEnvironment, logMessage);
+    if (w) {
+        w->early_return = HAS_EARLY_RETURN && earlyReturnAllowed;
+    }
+    return w;
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(
@@ -1003,11 +1034,19 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime) {
         return FAIL(w, "fmi3DoStep: NULL output argument");
     }
+    w->reached = currentCommunicationPoint + communicationStepSize;
     s = fmi2DoStep(w->inner, currentCommunicationPoint, communicationStepSize,
                    noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
     *eventHandlingNeeded = fmi3False;
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
+    if (s == fmi2OK && w->reached < currentCommunicationPoint + communicationStepSize) {
+        /* returned early at a discrete-state switch (the plant's wall contact) */
+        w->inner->s.last_time = w->reached;
+        *earlyReturn = fmi3True;
+        log_message(w->inner, fmi2OK, "logAll", "fmi3DoStep returns early at t=%.17g",
+                    w->reached);
+    }
     *lastSuccessfulTime = w->inner->s.last_time;
     return st(s);
 }

@@ -202,7 +202,8 @@ def _run_section(root: ET.Element, flavour: str) -> str:
     example = EXAMPLES.get(name)
     if example:
         lines.append(f"fmpy simulate {name}.fmu{interval} --start-values {example}")
-    if root.find("CoSimulation") is None and root.find("ScheduledExecution") is not None:
+    scheduled = root.find("CoSimulation") is None and root.find("ScheduledExecution") is not None
+    if scheduled:
         lines = lines[:1]  # fmpy simulate runs Co-Simulation and Model Exchange only
     if root.find("ModelExchange") is not None:
         lines.append(f"fmpy simulate {name}.fmu --interface-type ModelExchange --solver CVode")
@@ -213,6 +214,14 @@ def _run_section(root: ET.Element, flavour: str) -> str:
         + (f", stop_time={stop}" if stop else "")
         + ")\nprint(result.dtype.names)"
     )
+    if scheduled:
+        py = (
+            "# Scheduled Execution: your host loop activates the clock at every tick\n"
+            "from fmpy.fmi3 import FMU3ScheduledExecution\n"
+            "# instantiate, enterInitializationMode, set parameters, exitInitializationMode,\n"
+            "# fmi3GetIntervalDecimal(clock), then at t = k * interval: set the inputs,\n"
+            "# fmi3ActivateModelPartition(instance, clock, t), get the outputs"
+        )
     host = (
         "This is the Python flavour (pythonfmu): it runs in a Python host process such as fmpy."
         if flavour == "pythonfmu"

@@ -6,12 +6,16 @@ fmi2_me.c) under internal names. The FMUs:
 - PumaPlant.fmu: Co-Simulation and Model Exchange;
 - ImpedanceController.fmu: Co-Simulation (and Model Exchange), no clock: for any FMI 3 host;
 - ImpedanceControllerClocked.fmu: Scheduled Execution, its sampling as a periodic input clock
-  (`sample_clock`, interval = the parameter sample_period), for hosts that schedule clocks.
+  (`sample_clock`, interval = the parameter sample_period), for hosts that schedule clocks;
+- python/PumaPlant.fmu, python/ImpedanceController.fmu: the Python FMUs as FMI 3.0 (pythonfmu3,
+  Co-Simulation), when pythonfmu3 is installed.
 """
 
 from __future__ import annotations
 
 import hashlib
+import shutil
+import sys
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
@@ -120,6 +124,83 @@ def _build_description3(model_identifier: str, c_files: list[str]) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+SCRIPT3 = '''"""pythonfmu3 slave script of {name} as FMI 3.0: a thin shell over {cls}."""
+
+from pythonfmu3 import Fmi3Slave
+
+from impedance_cosim.fmi.slave3 import ModelSlave3
+from {module} import {cls}
+
+
+class {name}3(ModelSlave3, Fmi3Slave):
+    model_class = {cls}
+'''
+
+
+def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "python") -> Path:
+    """The Python FMU of a model as FMI 3.0 (pythonfmu3): the same model package and glue mixin
+    as the FMI 2.0 one, a generated slave script (module <name>3, so it never shares a module
+    name with the FMI 2.0 slave), and the modelDescription.xml replaced by ours."""
+    from pythonfmu3 import FmuBuilder  # build-time dependency only
+
+    cls = spec.load_model_class()
+    module, cls_name = spec.model_class.rsplit(".", 1)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="impcosim_py3_") as tmp:
+        stage = Path(tmp) / "stage"
+        _stage_python(spec, stage)
+        script = Path(tmp) / f"{cls.MODEL_NAME}3.py"
+        script.write_text(SCRIPT3.format(name=cls.MODEL_NAME, cls=cls_name, module=module))
+        project = [stage / "impedance_cosim", stage / spec.package]
+        raw = FmuBuilder.build_FMU(script, dest=Path(tmp) / "raw", project_files=project)
+        with zipfile.ZipFile(raw) as zin:
+            members = sorted(n for n in zin.namelist() if n != "modelDescription.xml")
+            contents = {n: zin.read(n) for n in members}
+    digest = hashlib.sha256(_xml_python(cls, ""))
+    for name in members:
+        digest.update(name.encode() + contents[name])
+    xml = _xml_python(cls, "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}")
+    target = out_dir / f"{cls.MODEL_NAME}.fmu"
+    tmp_target = temp_path(target)
+    with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(_info("modelDescription.xml"), xml)
+        for name in members:
+            z.writestr(
+                _info(name, 0o755 if name.startswith("binaries/") else 0o644), contents[name]
+            )
+        _add_documentation(z, xml, "pythonfmu")
+    tmp_target.replace(target)
+    return target
+
+
+def _stage_python(spec: FmuSpec, stage: Path) -> None:
+    """What the Python FMU bundles: the core of impedance_cosim and the model package."""
+    from impedance_cosim.build import FMU_CORE, REPO, _stage
+
+    core = stage / "impedance_cosim"
+    for item in FMU_CORE:
+        src = REPO / "impedance_cosim" / item
+        if src.is_dir():
+            _stage(src, core / item)
+        else:
+            core.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, core / item)
+    _stage(REPO / spec.package, stage / spec.package, skip={spec.script})
+
+
+def _xml_python(cls, token: str) -> bytes:
+    return model_description3(
+        model_name=cls.MODEL_NAME,
+        description=cls.DESCRIPTION,
+        token=token,
+        variables=cls.variables(),
+        default_experiment=cls.DEFAULT_EXPERIMENT,
+        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (pythonfmu3, FMI 3.0)",
+        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+    )
+
+
 def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
     """fmus/fmi3/: the FMI 3.0 plant and controllers, and PaperScenario-fmi3.ssp (the SSD of the
     FMI 2.0 archive, with the FMI 3.0 plant and clock-free controller)."""
@@ -130,4 +211,10 @@ def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
         build_native_fmu3(FMUS["controller"], folder, SAMPLE_CLOCK),
     ]
     built.append(build_ssp(out_dir, "PaperScenario-fmi3", folder))
+    try:
+        import pythonfmu3  # noqa: F401
+    except ImportError:
+        print("note: pythonfmu3 not installed: no FMI 3.0 Python FMUs", file=sys.stderr)
+        return built
+    built += [build_python_fmu3(FMUS[k], folder / "python") for k in ("plant", "controller")]
     return built

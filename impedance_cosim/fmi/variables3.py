@@ -10,6 +10,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 from impedance_cosim import __version__
+from impedance_cosim.fmi import variables as _fmi2
 from impedance_cosim.fmi.variables import (
     AUTHOR,
     COPYRIGHT,
@@ -23,6 +24,11 @@ from impedance_cosim.fmi.variables import (
 )
 
 FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+# What the FMI 2.0 writer declares beyond units, where the tables define it (issue 12: quantities,
+# display units, enumerations, sampled-data dependencies); absent, the FMI 3.0 XML goes without.
+QUANTITIES: dict[str, str] = getattr(_fmi2, "QUANTITIES", {})
+DISPLAY_UNITS: dict[str, tuple[str, float, float]] = getattr(_fmi2, "DISPLAY_UNITS", {})
+SAMPLED_INPUTS = getattr(_fmi2, "SAMPLED_INPUTS", object())
 
 
 @dataclass(frozen=True)
@@ -127,6 +133,12 @@ def model_description3(
     for u in used:
         unit = ET.SubElement(units, "Unit", {"name": u})
         ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
+        if u in DISPLAY_UNITS:
+            name, factor, offset = DISPLAY_UNITS[u]
+            ET.SubElement(
+                unit, "DisplayUnit", {"name": name, "factor": repr(factor), "offset": repr(offset)}
+            )
+    _type_definitions(root, [u for u in used if u in QUANTITIES], table)
     cats = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES.items():
         ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
@@ -159,8 +171,15 @@ def model_description3(
             attrs["initial"] = "calculated"
         if v.derivative:
             attrs["derivative"] = str(vr_of[v.derivative])
+        enumeration = getattr(v, "enumeration", None)
+        if enumeration:  # an Int32 of the enumeration's declared type (as in FMI 2.0)
+            attrs.update(declaredType=enumeration.name, min="1", max=str(len(enumeration.items)))
         if v.unit and v.type == "Real":
+            if v.unit in QUANTITIES:
+                attrs["declaredType"] = QUANTITIES[v.unit]
             attrs["unit"] = v.unit
+            if v.unit in DISPLAY_UNITS:
+                attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
         if v.min is not None:
             attrs["min"] = _fmt(v.min)
         if v.max is not None:
@@ -202,9 +221,14 @@ def model_description3(
     states = model_exchange.states if model_exchange else ()
     if output_dependencies == "" and states and not clock:
         output_dependencies = " ".join(str(vr_of[s]) for s in states)
+    if output_dependencies is SAMPLED_INPUTS or output_dependencies == SAMPLED_INPUTS:
+        inputs = [str(vr) for vr, v in enumerate(table) if v.causality == "input"]
+        dep = {"dependencies": " ".join(inputs),
+               "dependenciesKind": " ".join(["discrete"] * len(inputs))}  # fmt: skip
+    else:
+        dep = {} if output_dependencies is None else {"dependencies": output_dependencies}
     for vr, v in enumerate(table):
         if v.causality == "output":
-            dep = {} if output_dependencies is None else {"dependencies": output_dependencies}
             ET.SubElement(ms, "Output", {"valueReference": str(vr), **dep})
     if not clock:
         for vr, v in enumerate(table):
@@ -218,6 +242,28 @@ def model_description3(
             ET.SubElement(ms, "EventIndicator", {"valueReference": str(vr)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _type_definitions(root: ET.Element, units: list[str], table: list[Variable]) -> None:
+    """TypeDefinitions as the FMI 2.0 writer has them: a Float64Type per unit (its quantity and
+    display unit), an Int32Type per enumeration (its values listed in the description)."""
+    enums = {}
+    for v in table:
+        e = getattr(v, "enumeration", None)
+        if e:
+            enums[e.name] = e
+    if not units and not enums:
+        return
+    types = ET.SubElement(root, "TypeDefinitions")
+    for u in units:
+        attrs = {"name": QUANTITIES[u], "quantity": QUANTITIES[u], "unit": u}
+        if u in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[u][0]
+        ET.SubElement(types, "Float64Type", attrs)
+    for e in enums.values():
+        text = f"{e.description}: {e.choices()}"
+        attrs = {"name": e.name, "description": text, "min": "1", "max": str(len(e.items))}
+        ET.SubElement(types, "Int32Type", attrs)
 
 
 def c_config3(n_table: int, model_exchange: ModelExchange | None, clock: SampleClock | None,

@@ -52,15 +52,16 @@ typedef struct {
     double reached;   /* where the last model step stopped */
 } Wrapper;
 
-/* The model step fmi2DoStep takes (d is inst->s.d of an instance whose logger environment is
- * its Wrapper): the model's own, or, where early return is on, one that stops at an event. */
+/* The model step fmi2DoStep takes: the model's own, or, where early return is on, one that stops
+ * at an event. fmi2DoStep steps the instance's own Data (inst->s.d, never a copy: the early-return
+ * test would fail otherwise), so d leads to the instance and its logger environment, the Wrapper. */
 int model_step_fmi3(Data *d, double t, double h, char *msg)
 {
     const Instance *inst =
         (const Instance *)((const char *)d - offsetof(Instance, s) - offsetof(Snapshot, d));
     Wrapper *w = (Wrapper *)inst->cb.componentEnvironment;
 #if HAS_EARLY_RETURN
-    if (w->early_return) {
+    if (w->early_return && w->inner == inst) {
         return model_step_early(d, t, h, &w->reached, msg);
     }
 #endif

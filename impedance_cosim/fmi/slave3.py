@@ -27,29 +27,17 @@ class ModelSlave3(ModelSlave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        self._time = 0.0
         self.register_variable(
             Float64(
                 "time",
                 causality=Fmi3Causality.independent,
                 variability=Fmi3Variability.continuous,
                 description="Simulation time",
-                getter=lambda: self._time,
+                getter=self._time,
             )
         )
 
-    def setup_experiment(self, start_time: float, stop_time=None, tolerance=None) -> None:
-        super().setup_experiment(start_time, stop_time, tolerance)
-        self._time = float(start_time)
-
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        ok = super().do_step(current_time, step_size)
-        self._time = current_time + step_size if ok else current_time
-        return ok
-
-    def _get_fmu_state(self) -> dict[str, Any]:
-        return {**super()._get_fmu_state(), "time": self._time}
-
-    def _set_fmu_state(self, state: dict[str, Any]) -> None:
-        super()._set_fmu_state(state)
-        self._time = state["time"]
+    def _time(self) -> float:
+        """The model's time (where its last step ended), else the start time: part of the state
+        the model already saves, so FMU states need nothing more."""
+        return float(getattr(self.model, "t", self._start_time))

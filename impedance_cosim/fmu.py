@@ -46,10 +46,12 @@ class FmuError(RuntimeError):
 def check_fmu(fmu: Path, description: Any) -> None:
     """FmuError naming the problem unless the archive is intact (every member's CRC) and has a
     binary for this platform (checked once per file version)."""
-    if description.coSimulation is None:
+    # an FMI 3.0 Scheduled Execution FMU (a clocked model) runs as co-simulation (fmu3.py)
+    interface = description.coSimulation or getattr(description, "scheduledExecution", None)
+    if interface is None:
         raise FmuError(f"{fmu.name} is not a co-simulation FMU")
     folder = platform_tuple if str(description.fmiVersion).startswith("3") else platform
-    binary = f"binaries/{folder}/{description.coSimulation.modelIdentifier}"
+    binary = f"binaries/{folder}/{interface.modelIdentifier}"
     st = fmu.stat()
     problem = _archive_problem(str(fmu), st.st_mtime_ns, st.st_size, binary)
     if problem:

@@ -9,7 +9,7 @@ import ctypes
 from pathlib import Path
 from typing import Any
 
-from fmpy.fmi3 import FMU3Slave, fmi3LogMessageCallback
+from fmpy.fmi3 import FMU3ScheduledExecution, FMU3Slave, fmi3LogMessageCallback
 
 from impedance_cosim.fmu import STATUS, FmuError, FmuInstance
 
@@ -32,25 +32,31 @@ def open_fmu(fmu: str | Path, instance_name: str, logging_on: bool = True) -> Fm
     from fmpy import read_model_description
 
     try:
-        version = read_model_description(str(fmu), validate=False).fmiVersion
+        md = read_model_description(str(fmu), validate=False)
     except Exception:  # FmuInstance reports an unreadable archive with its own message
-        version = "2.0"
-    cls = FmuInstance3 if version.startswith("3") else FmuInstance
-    return cls(fmu, instance_name, logging_on)
+        return FmuInstance(fmu, instance_name, logging_on)
+    if not md.fmiVersion.startswith("3"):
+        return FmuInstance(fmu, instance_name, logging_on)
+    if md.coSimulation is None and md.scheduledExecution is not None:
+        return ClockedInstance(fmu, instance_name, logging_on)
+    return FmuInstance3(fmu, instance_name, logging_on)
 
 
 class FmuInstance3(FmuInstance):
     """An instantiated FMI 3.0 co-simulation FMU (see module docstring)."""
 
+    _interface = FMU3Slave
+
     def _load(self, unzip_dir: str, logging_on: bool) -> None:
         self.variables = {v.name: v for v in self.description.modelVariables}
         self.messages: list[tuple[str, str, str]] = []
         self._logger = fmi3LogMessageCallback(self._log3)
+        interface = self.description.coSimulation or self.description.scheduledExecution
         try:
-            self.slave = FMU3Slave(
+            self.slave = self._interface(
                 guid=self.description.guid,
                 unzipDirectory=unzip_dir,
-                modelIdentifier=self.description.coSimulation.modelIdentifier,
+                modelIdentifier=interface.modelIdentifier,
                 instanceName=self.name,
             )
         except Exception as exc:  # fmpy raises bare Exceptions when the library does not load
@@ -66,6 +72,9 @@ class FmuInstance3(FmuInstance):
             self.slave.freeLibrary()
             raise
         self._alive = True
+        self._setup_stepping()
+
+    def _setup_stepping(self) -> None:
         self._do_step = self.slave._functions["fmi3DoStep"]  # raw ctypes: we check the status
         self._step_out = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
         self._step_refs = [ctypes.byref(x) for x in self._step_out]
@@ -138,3 +147,48 @@ class FmuInstance3(FmuInstance):
 
     def deserialize_state(self, data: bytes) -> Any:
         return self._call("deserializeFMUState", bytes(data))
+
+
+class ClockedInstance(FmuInstance3):
+    """An FMI 3.0 Scheduled Execution FMU with one periodic input clock (the clocked
+    controller), behind the same interface: step(t, h) activates the clock at every tick in
+    [t, t + h) on the inputs set before the step, so the master honours the clock whatever its
+    communication step. Ticks are at start + k * interval (interval from fmi3GetIntervalDecimal
+    after initialization)."""
+
+    _interface = FMU3ScheduledExecution
+
+    def _setup_stepping(self) -> None:
+        clocks = [v for v in self.description.modelVariables if v.type == "Clock"]
+        if len(clocks) != 1:
+            raise FmuError(f"{self.name}: {self.path.name} has {len(clocks)} clocks, not one")
+        self.clock = clocks[0].valueReference
+        self.ticks = 0  # activations so far
+        self._next_tick = 0
+        self._interval = None
+        self._activate = self.slave._functions["fmi3ActivateModelPartition"]
+
+    def exit_initialization(self) -> None:
+        super().exit_initialization()
+        intervals, qualifiers = (ctypes.c_double * 1)(), (ctypes.c_int * 1)()
+        vrs = (ctypes.c_uint32 * 1)(self.clock)
+        status = self.slave._functions["fmi3GetIntervalDecimal"](
+            self.slave.component, vrs, 1, intervals, qualifiers
+        )
+        if status > 1 or not intervals[0] > 0.0:
+            raise self._fail(f"the clock interval is not usable ({intervals[0]})", max(status, 3))
+        self._interval = intervals[0]
+
+    def step(self, t: float, h: float) -> None:
+        """Every tick start + k * interval in [t, t + h), in order (fmi3ActivateModelPartition;
+        fmpy's activateModelPartition would also call fmi3ExitConfigurationMode)."""
+        end = t + h
+        while True:
+            tick = self.start_time + self._next_tick * self._interval
+            if tick >= end - 1e-9 * self._interval:
+                return
+            status = self._activate(self.slave.component, self.clock, tick)
+            if status > 1:
+                raise self._fail(f"clock tick at t={tick} returned {STATUS[status]}", status)
+            self._next_tick += 1
+            self.ticks += 1

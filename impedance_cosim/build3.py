@@ -38,6 +38,7 @@ from impedance_cosim.build import (
 from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_GLUE = ("fmi3_glue.c", "fmi3_events.c", "fmi3_stubs.c", "fmi3_wrapper.h", "fmi2_hidden.h")
 # compiled into the FMI 3 binary by inclusion from fmi3_glue.c, not on their own
 INCLUDED = ("fmi2_glue.c", "fmi2_me.c")
 SAMPLE_CLOCK = SampleClock(
@@ -80,8 +81,8 @@ def build_native_fmu3(
     headers = Path(fmpy.__file__).parent / "c-code"
     for name in FMI3_HEADERS:
         sources[name] = (headers / name).read_bytes()
-    sources["fmi3_glue.c"] = (NATIVE / "src" / "fmi3_glue.c").read_bytes()
-    sources["fmi2_hidden.h"] = (NATIVE / "src" / "fmi2_hidden.h").read_bytes()
+    for name in FMI3_GLUE:
+        sources[name] = (NATIVE / "src" / name).read_bytes()
     n_table = len(full_table(cls.variables(), me))
     sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables(), early).encode()
     c_files = sorted(n for n in sources if n.endswith(".c") and n not in INCLUDED)

@@ -80,3 +80,23 @@ def test_fmi3_closed_loop_agrees_with_x86_64_linux(platform, fmi3_dir, tmp_path,
     worst = float((np.abs(rows - reference) / scale).max())
     print(f"FMI 3.0 {platform}: worst difference to x86_64-linux relative to range: {worst:.3g}")
     assert worst <= TOLERANCE[platform], worst
+
+
+@pytest.mark.parametrize("platform", ["linux64", "win64", "aarch64-linux"])
+@pytest.mark.parametrize("name", [PLANT, CONTROLLER, "ImpedanceControllerClocked.fmu"])
+def test_fmi3_sources_compile_without_warnings_or_undefined_symbols(
+    platform, name, fmi3_dir, tmp_path
+):
+    """sources/ of each FMI 3.0 FMU, as its buildDescription.xml lists them, with -Werror (and,
+    on Linux, --no-undefined: every internal function of the three fmi3_*.c files is there)."""
+    import xml.etree.ElementTree as ET
+
+    toolchain = (
+        need_compiler(platform) if platform != "linux64" else toolchains.BY_PLATFORM[platform]
+    )
+    with zipfile.ZipFile(fmi3_dir / name) as z:
+        z.extractall(tmp_path)
+    src = tmp_path / "sources"
+    files = [f.get("name") for f in ET.parse(src / "buildDescription.xml").iter("SourceFile")]
+    strict = ("-Werror",) if platform == "win64" else ("-Werror", "-Wl,--no-undefined")
+    toolchains.compile_library(toolchain, src, files, tmp_path / f"lib{toolchain.suffix}", strict)

@@ -1,9 +1,9 @@
 /* The FMI 3.0 interface of every native model (Co-Simulation, Model Exchange and, for a model
  * with a sample clock, Scheduled Execution): a thin layer over the FMI 2.0 implementation.
  *
- * This file includes fmi2_glue.c and fmi2_me.c (one translation unit, the FMU's only compiled
- * glue file) with their functions renamed to internal impc_fmi2* names (fmi2_hidden.h), and
- * calls them: one state machine, one set of checks (parameters, non-finite inputs, call order,
+ * This file includes fmi2_glue.c and fmi2_me.c (one translation unit) with their functions
+ * renamed to internal impc_fmi2* names (fmi2_hidden.h), and calls them (so do fmi3_events.c:
+ * Model Exchange and the clock, and fmi3_stubs.c: what is not provided): one state machine, one set of checks (parameters, non-finite inputs, call order,
  * FMU-state validation) and one FMU-state format for both standards. What FMI 3 adds is here:
  * the `independent` time variable (value reference VR_TIME, read-only), the nValues argument,
  * fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra results,
@@ -27,8 +27,7 @@
 #undef model_step
 int model_step(Data *d, double t, double h, char *msg);
 
-/* VR_TIME, VR_INDICATOR; HAS_CLOCK, VR_CLOCK, CLOCK_PERIOD_VR; HAS_EARLY_RETURN (the build) */
-#include "fmi3_config.h"
+#include "fmi3_wrapper.h" /* Wrapper, WRAP, FAIL */
 #if HAS_EARLY_RETURN
 /* model.c: model_step that stops at the first discrete-state switch inside the step */
 int model_step_early(Data *d, double t, double h, double *reached, char *msg);
@@ -37,20 +36,6 @@ int model_step_early(Data *d, double t, double h, double *reached, char *msg);
 #ifndef MODEL_EXCHANGE
 #error "the FMI 3 layer needs the model's Model Exchange side (config.h: MODEL_EXCHANGE)"
 #endif
-
-#define WRAPPER_MAGIC 0x494d5033u /* "IMP3" */
-
-typedef enum { K_ME, K_CS, K_SE } Kind;
-
-typedef struct {
-    unsigned magic; /* WRAPPER_MAGIC while alive; fmi3FreeInstance clears it */
-    Instance *inner; /* the FMI 2 instance (fmi2_glue.c): all the state */
-    Kind kind;
-    fmi3InstanceEnvironment env;
-    fmi3LogMessageCallback log;
-    int early_return; /* co-simulation: the importer allows early return, the model offers it */
-    double reached;   /* where the last model step stopped */
-} Wrapper;
 
 /* The model step fmi2DoStep takes: the model's own, or, where early return is on, one that stops
  * at an event. fmi2DoStep steps the instance's own Data (inst->s.d, never a copy: the early-return
@@ -124,14 +109,14 @@ static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status stat
            category ? category : "logAll", text);
 }
 
-static fmi3Status st(fmi2Status s)
+fmi3Status status3(fmi2Status s)
 {
     return s <= fmi2Fatal ? (fmi3Status)s : fmi3Error;
 }
 
 /* The wrapper, if instance is a live FMI 3 instance of this FMU (else NULL, said on stderr:
  * the host's logger lives in the instance and cannot be trusted then). */
-static Wrapper *live(fmi3Instance instance, const char *function)
+Wrapper *wrapper_of(fmi3Instance instance, const char *function)
 {
     Wrapper *w = (Wrapper *)instance;
     if (!w) {
@@ -145,13 +130,6 @@ static Wrapper *live(fmi3Instance instance, const char *function)
     return w;
 }
 
-#define WRAP(function)                                                                         \
-    Wrapper *w = live(instance, function);                                                     \
-    if (!w) {                                                                                  \
-        return fmi3Error;                                                                      \
-    }
-
-#define FAIL(w, ...) (log_message((w)->inner, fmi2Error, "logStatusError", __VA_ARGS__), fmi3Error)
 
 static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Boolean visible,
                             fmi3Boolean logging_on, fmi3InstanceEnvironment env,
@@ -192,7 +170,7 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
                                const fmi3String categories[])
 {
     WRAP("fmi3SetDebugLogging");
-    return st(fmi2SetDebugLogging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
+    return status3(fmi2SetDebugLogging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
                                   categories));
 }
 
@@ -255,7 +233,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(
 
 void fmi3FreeInstance(fmi3Instance instance)
 {
-    Wrapper *w = live(instance, "fmi3FreeInstance");
+    Wrapper *w = wrapper_of(instance, "fmi3FreeInstance");
     if (!w) {
         return;
     }
@@ -276,15 +254,15 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     s = fmi2SetupExperiment(w->inner, toleranceDefined ? fmi2True : fmi2False, tolerance,
                             startTime, stopTimeDefined ? fmi2True : fmi2False, stopTime);
     if (s != fmi2OK) {
-        return st(s);
+        return status3(s);
     }
-    return st(fmi2EnterInitializationMode(w->inner));
+    return status3(fmi2EnterInitializationMode(w->inner));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
     WRAP("fmi3ExitInitializationMode");
-    return st(fmi2ExitInitializationMode(w->inner));
+    return status3(fmi2ExitInitializationMode(w->inner));
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
@@ -293,21 +271,20 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
     if (w->kind != K_ME) {
         return FAIL(w, "fmi3EnterEventMode: this FMU has event mode under Model Exchange only");
     }
-    return st(fmi2EnterEventMode(w->inner));
+    return status3(fmi2EnterEventMode(w->inner));
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
     WRAP("fmi3Terminate");
-    return st(fmi2Terminate(w->inner));
+    return status3(fmi2Terminate(w->inner));
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     WRAP("fmi3Reset");
-    return st(fmi2Reset(w->inner));
+    return status3(fmi2Reset(w->inner));
 }
-
 /* --- getters and setters ---------------------------------------------------------------------- */
 
 /* Every variable is a scalar: nValues must equal nValueReferences; arrays may be NULL only when
@@ -371,7 +348,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
         return fmi3Error;
     }
     if (!mentions_extra(valueReferences, nValueReferences)) {
-        return st(fmi2GetReal(w->inner, (const fmi2ValueReference *)valueReferences,
+        return status3(fmi2GetReal(w->inner, (const fmi2ValueReference *)valueReferences,
                               nValueReferences, values));
     }
     for (size_t k = 0; k < nValueReferences; k++) {
@@ -379,7 +356,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
         if (valueReferences[k] >= N_VARS) {
             s = get_extra(w, valueReferences[k], &values[k]);
         } else {
-            s = st(fmi2GetReal(w->inner, (const fmi2ValueReference *)&valueReferences[k], 1,
+            s = status3(fmi2GetReal(w->inner, (const fmi2ValueReference *)&valueReferences[k], 1,
                                &values[k]));
         }
         if (s != fmi3OK) {
@@ -406,7 +383,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                         (unsigned)valueReferences[k]);
         }
     }
-    return st(fmi2SetReal(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(fmi2SetReal(w->inner, (const fmi2ValueReference *)valueReferences,
                           nValueReferences, values));
 }
 
@@ -417,7 +394,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt32")) {
         return fmi3Error;
     }
-    return st(fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
                              nValueReferences, (fmi2Integer *)values));
 }
 
@@ -428,7 +405,7 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt32")) {
         return fmi3Error;
     }
-    return st(fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
                              nValueReferences, (const fmi2Integer *)values));
 }
 
@@ -446,7 +423,7 @@ fmi3Status fmi3GetInt64(fmi3Instance instance, const fmi3ValueReference valueRef
         fmi2Status s = fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences + k,
                                       n, buf);
         if (s != fmi2OK) {
-            return st(s);
+            return status3(s);
         }
         for (size_t j = 0; j < n; j++) {
             values[k + j] = buf[j];
@@ -483,7 +460,7 @@ fmi3Status fmi3SetInt64(fmi3Instance instance, const fmi3ValueReference valueRef
     s = fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
                        buf);
     free(buf);
-    return st(s);
+    return status3(s);
 }
 
 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
@@ -499,7 +476,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
         fmi2Status s = fmi2GetBoolean(w->inner, (const fmi2ValueReference *)valueReferences + k,
                                       n, buf);
         if (s != fmi2OK) {
-            return st(s);
+            return status3(s);
         }
         for (size_t j = 0; j < n; j++) {
             values[k + j] = buf[j] != fmi2False;
@@ -530,7 +507,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
     s = fmi2SetBoolean(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
                        buf);
     free(buf);
-    return st(s);
+    return status3(s);
 }
 
 fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
@@ -540,7 +517,7 @@ fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueRe
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetString")) {
         return fmi3Error;
     }
-    return st(fmi2GetString(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(fmi2GetString(w->inner, (const fmi2ValueReference *)valueReferences,
                             nValueReferences, values));
 }
 
@@ -551,468 +528,50 @@ fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueRe
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetString")) {
         return fmi3Error;
     }
-    return st(fmi2SetString(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(fmi2SetString(w->inner, (const fmi2ValueReference *)valueReferences,
                             nValueReferences, values));
 }
 
-/* Types this FMU has no variables of: an empty call is fine, anything else names the type. */
-#define NO_VARIABLES(get, set, type, name)                                                     \
-    fmi3Status get(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
-                   size_t nValueReferences, type values[], size_t nValues)                     \
-    {                                                                                          \
-        WRAP(#get);                                                                            \
-        (void)valueReferences, (void)values, (void)nValues;                                    \
-        return nValueReferences ? FAIL(w, "%s: this FMU has no %s variables", #get, name)      \
-                                : fmi3OK;                                                      \
-    }                                                                                          \
-    fmi3Status set(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
-                   size_t nValueReferences, const type values[], size_t nValues)               \
-    {                                                                                          \
-        WRAP(#set);                                                                            \
-        (void)valueReferences, (void)values, (void)nValues;                                    \
-        return nValueReferences ? FAIL(w, "%s: this FMU has no %s variables", #set, name)      \
-                                : fmi3OK;                                                      \
-    }
-
-NO_VARIABLES(fmi3GetFloat32, fmi3SetFloat32, fmi3Float32, "Float32")
-NO_VARIABLES(fmi3GetInt8, fmi3SetInt8, fmi3Int8, "Int8")
-NO_VARIABLES(fmi3GetUInt8, fmi3SetUInt8, fmi3UInt8, "UInt8")
-NO_VARIABLES(fmi3GetInt16, fmi3SetInt16, fmi3Int16, "Int16")
-NO_VARIABLES(fmi3GetUInt16, fmi3SetUInt16, fmi3UInt16, "UInt16")
-NO_VARIABLES(fmi3GetUInt32, fmi3SetUInt32, fmi3UInt32, "UInt32")
-NO_VARIABLES(fmi3GetUInt64, fmi3SetUInt64, fmi3UInt64, "UInt64")
-
-fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                         size_t nValueReferences, size_t valueSizes[], fmi3Binary values[],
-                         size_t nValues)
-{
-    WRAP("fmi3GetBinary");
-    (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
-    return nValueReferences ? FAIL(w, "fmi3GetBinary: this FMU has no Binary variables") : fmi3OK;
-}
-
-fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                         size_t nValueReferences, const size_t valueSizes[],
-                         const fmi3Binary values[], size_t nValues)
-{
-    WRAP("fmi3SetBinary");
-    (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
-    return nValueReferences ? FAIL(w, "fmi3SetBinary: this FMU has no Binary variables") : fmi3OK;
-}
-
-/* The sample clock is activated by fmi3ActivateModelPartition only (Scheduled Execution). */
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Clock values[])
-{
-    WRAP("fmi3GetClock");
-    (void)valueReferences, (void)values;
-    return nValueReferences ? FAIL(w, "fmi3GetClock: this FMU has no output clocks") : fmi3OK;
-}
-
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Clock values[])
-{
-    WRAP("fmi3SetClock");
-    (void)valueReferences, (void)values;
-    return nValueReferences ? FAIL(w, "fmi3SetClock: clocks are activated with "
-                                      "fmi3ActivateModelPartition (Scheduled Execution)")
-                            : fmi3OK;
-}
-
-fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
-                                               fmi3ValueReference valueReference,
-                                               size_t *nDependencies)
-{
-    WRAP("fmi3GetNumberOfVariableDependencies");
-    (void)valueReference, (void)nDependencies;
-    return FAIL(w, "variable dependencies are given in modelDescription.xml only");
-}
-
-fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference dependent,
-                                       size_t elementIndicesOfDependent[],
-                                       fmi3ValueReference independents[],
-                                       size_t elementIndicesOfIndependents[],
-                                       fmi3DependencyKind dependencyKinds[],
-                                       size_t nDependencies)
-{
-    WRAP("fmi3GetVariableDependencies");
-    (void)dependent, (void)elementIndicesOfDependent, (void)independents,
-        (void)elementIndicesOfIndependents, (void)dependencyKinds, (void)nDependencies;
-    return FAIL(w, "variable dependencies are given in modelDescription.xml only");
-}
-
-/* --- FMU state: the FMI 2 layer's (validated on set and deserialization) ----------------------- */
+/* Types this FMU has no variables of: an empty call is fine, anything else names the type. *//* --- FMU state: the FMI 2 layer's (validated on set and deserialization) ----------------------- */
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     WRAP("fmi3GetFMUState");
-    return st(fmi2GetFMUstate(w->inner, FMUState));
+    return status3(fmi2GetFMUstate(w->inner, FMUState));
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
     WRAP("fmi3SetFMUState");
-    return st(fmi2SetFMUstate(w->inner, FMUState));
+    return status3(fmi2SetFMUstate(w->inner, FMUState));
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     WRAP("fmi3FreeFMUState");
-    return st(fmi2FreeFMUstate(w->inner, FMUState));
+    return status3(fmi2FreeFMUstate(w->inner, FMUState));
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
     WRAP("fmi3SerializedFMUStateSize");
-    return st(fmi2SerializedFMUstateSize(w->inner, FMUState, size));
+    return status3(fmi2SerializedFMUstateSize(w->inner, FMUState, size));
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
                                  fmi3Byte serializedState[], size_t size)
 {
     WRAP("fmi3SerializeFMUState");
-    return st(fmi2SerializeFMUstate(w->inner, FMUState, (fmi2Byte *)serializedState, size));
+    return status3(fmi2SerializeFMUstate(w->inner, FMUState, (fmi2Byte *)serializedState, size));
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
                                    size_t size, fmi3FMUState *FMUState)
 {
     WRAP("fmi3DeserializeFMUState");
-    return st(fmi2DeSerializeFMUstate(w->inner, (const fmi2Byte *)serializedState, size,
+    return status3(fmi2DeSerializeFMUstate(w->inner, (const fmi2Byte *)serializedState, size,
                                       FMUState));
 }
-
-/* --- not provided ----------------------------------------------------------------------------- */
-
-fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
-                                        size_t nUnknowns, const fmi3ValueReference knowns[],
-                                        size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
-                                        fmi3Float64 sensitivity[], size_t nSensitivity)
-{
-    WRAP("fmi3GetDirectionalDerivative");
-    (void)unknowns, (void)nUnknowns, (void)knowns, (void)nKnowns, (void)seed, (void)nSeed,
-        (void)sensitivity, (void)nSensitivity;
-    return FAIL(w, "directional derivatives are not provided");
-}
-
-fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
-                                    size_t nUnknowns, const fmi3ValueReference knowns[],
-                                    size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
-                                    fmi3Float64 sensitivity[], size_t nSensitivity)
-{
-    WRAP("fmi3GetAdjointDerivative");
-    (void)unknowns, (void)nUnknowns, (void)knowns, (void)nKnowns, (void)seed, (void)nSeed,
-        (void)sensitivity, (void)nSensitivity;
-    return FAIL(w, "adjoint derivatives are not provided");
-}
-
-fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance)
-{
-    WRAP("fmi3EnterConfigurationMode");
-    return FAIL(w, "this FMU has no structural parameters (no configuration mode)");
-}
-
-fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance)
-{
-    WRAP("fmi3ExitConfigurationMode");
-    return FAIL(w, "this FMU has no structural parameters (no configuration mode)");
-}
-
-fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance,
-                                    const fmi3ValueReference valueReferences[],
-                                    size_t nValueReferences, const fmi3Int32 orders[],
-                                    fmi3Float64 values[], size_t nValues)
-{
-    WRAP("fmi3GetOutputDerivatives");
-    (void)valueReferences, (void)nValueReferences, (void)orders, (void)values, (void)nValues;
-    return FAIL(w, "output derivatives are not provided (maxOutputDerivativeOrder=0)");
-}
-
-fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
-{
-    WRAP("fmi3EvaluateDiscreteStates");
-    return FAIL(w, "fmi3EvaluateDiscreteStates is not provided "
-                   "(providesEvaluateDiscreteStates=false)");
-}
-
-/* --- clocks (Scheduled Execution) ------------------------------------------------------------- */
-
-/* The clock's value reference is VR_CLOCK: 1 if every reference is it, else 0 after logging. */
-static int clocks_only(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, const void *out,
-                       const char *function)
-{
-    if (nvr > 0 && (!vr || !out)) {
-        log_message(w->inner, fmi2Error, "logStatusError", "%s: NULL array", function);
-        return 0;
-    }
-    for (size_t k = 0; k < nvr; k++) {
-#if HAS_CLOCK
-        if (vr[k] == VR_CLOCK) {
-            continue;
-        }
-#endif
-        log_message(w->inner, fmi2Error, "logStatusError", "%s: %u is not a clock of this FMU",
-                    function, (unsigned)vr[k]);
-        return 0;
-    }
-    return 1;
-}
-
-fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
-                                  const fmi3ValueReference valueReferences[],
-                                  size_t nValueReferences, fmi3Float64 intervals[],
-                                  fmi3IntervalQualifier qualifiers[])
-{
-    WRAP("fmi3GetIntervalDecimal");
-    if (!clocks_only(w, valueReferences, nValueReferences, intervals, "fmi3GetIntervalDecimal") ||
-        (nValueReferences > 0 && !qualifiers)) {
-        return fmi3Error;
-    }
-    if (nValueReferences > 0 && w->inner->s.phase == S_INSTANTIATED) {
-        return FAIL(w, "fmi3GetIntervalDecimal: the interval is known from initialization mode "
-                       "on (it is the parameter sample_period)");
-    }
-    for (size_t k = 0; k < nValueReferences; k++) {
-#if HAS_CLOCK
-        intervals[k] = w->inner->s.d.r[CLOCK_PERIOD_VR];
-#endif
-        qualifiers[k] = fmi3IntervalChanged;
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                               size_t nValueReferences, fmi3Float64 shifts[])
-{
-    WRAP("fmi3GetShiftDecimal");
-    if (!clocks_only(w, valueReferences, nValueReferences, shifts, "fmi3GetShiftDecimal")) {
-        return fmi3Error;
-    }
-    for (size_t k = 0; k < nValueReferences; k++) {
-        shifts[k] = 0.0; /* the first tick is at the start time */
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
-                                   const fmi3ValueReference valueReferences[],
-                                   size_t nValueReferences, fmi3UInt64 counters[],
-                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
-{
-    WRAP("fmi3GetIntervalFraction");
-    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions,
-        (void)qualifiers;
-    return FAIL(w, "the clock interval is given as a decimal only (supportsFraction=false)");
-}
-
-fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, fmi3UInt64 counters[],
-                                fmi3UInt64 resolutions[])
-{
-    WRAP("fmi3GetShiftFraction");
-    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
-    return FAIL(w, "the clock shift is given as a decimal only (supportsFraction=false)");
-}
-
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                  size_t nValueReferences, const fmi3Float64 intervals[])
-{
-    WRAP("fmi3SetIntervalDecimal");
-    (void)valueReferences, (void)nValueReferences, (void)intervals;
-    return FAIL(w, "the clock interval is fixed by the parameter sample_period");
-}
-
-fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
-                                   const fmi3ValueReference valueReferences[],
-                                   size_t nValueReferences, const fmi3UInt64 counters[],
-                                   const fmi3UInt64 resolutions[])
-{
-    WRAP("fmi3SetIntervalFraction");
-    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
-    return FAIL(w, "the clock interval is fixed by the parameter sample_period");
-}
-
-fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                               size_t nValueReferences, const fmi3Float64 shifts[])
-{
-    WRAP("fmi3SetShiftDecimal");
-    (void)valueReferences, (void)nValueReferences, (void)shifts;
-    return FAIL(w, "the clock has no shift to set");
-}
-
-fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, const fmi3UInt64 counters[],
-                                const fmi3UInt64 resolutions[])
-{
-    WRAP("fmi3SetShiftFraction");
-    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
-    return FAIL(w, "the clock has no shift to set");
-}
-
-fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
-                                      fmi3Float64 activationTime)
-{
-    fmi2EventInfo ev;
-    fmi2Status s;
-    WRAP("fmi3ActivateModelPartition");
-    if (w->kind != K_SE) {
-        return FAIL(w, "fmi3ActivateModelPartition: this instance is not for Scheduled Execution");
-    }
-    if (!clocks_only(w, &clockReference, 1, &clockReference, "fmi3ActivateModelPartition")) {
-        return fmi3Error;
-    }
-    if (w->inner->s.phase != S_EVENT_MODE) {
-        return FAIL(w, "fmi3ActivateModelPartition called before fmi3ExitInitializationMode or "
-                       "after fmi3Terminate");
-    }
-    if (!isfinite(activationTime) || activationTime < w->inner->s.last_time) {
-        return FAIL(w, "fmi3ActivateModelPartition: activation time %.17g is not finite or "
-                       "before the previous one (%.17g)", activationTime, w->inner->s.last_time);
-    }
-    /* a tick is an event of the Model Exchange side at that time: the samples due are taken */
-    s = fmi2EnterEventMode(w->inner);
-    if (s == fmi2OK) {
-        s = fmi2SetTime(w->inner, activationTime);
-    }
-    if (s == fmi2OK) {
-        s = fmi2NewDiscreteStates(w->inner, &ev);
-    }
-    return st(s);
-}
-
-/* --- Model Exchange --------------------------------------------------------------------------- */
-
-fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
-                                    fmi3Boolean *terminateSimulation,
-                                    fmi3Boolean *nominalsOfContinuousStatesChanged,
-                                    fmi3Boolean *valuesOfContinuousStatesChanged,
-                                    fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
-{
-    fmi2EventInfo ev;
-    fmi2Status s;
-    WRAP("fmi3UpdateDiscreteStates");
-    if (w->kind != K_ME) {
-        return FAIL(w, "fmi3UpdateDiscreteStates: this FMU has event mode under Model "
-                       "Exchange only");
-    }
-    s = fmi2NewDiscreteStates(w->inner, &ev);
-    if (s != fmi2OK) {
-        return st(s);
-    }
-    /* every output argument may be NULL (FMI 3.0, section 3.2.2: then it is not needed) */
-    if (discreteStatesNeedUpdate) {
-        *discreteStatesNeedUpdate = ev.newDiscreteStatesNeeded != fmi2False;
-    }
-    if (terminateSimulation) {
-        *terminateSimulation = ev.terminateSimulation != fmi2False;
-    }
-    if (nominalsOfContinuousStatesChanged) {
-        *nominalsOfContinuousStatesChanged = ev.nominalsOfContinuousStatesChanged != fmi2False;
-    }
-    if (valuesOfContinuousStatesChanged) {
-        *valuesOfContinuousStatesChanged = ev.valuesOfContinuousStatesChanged != fmi2False;
-    }
-    if (nextEventTimeDefined) {
-        *nextEventTimeDefined = ev.nextEventTimeDefined != fmi2False;
-    }
-    if (nextEventTime) {
-        *nextEventTime = ev.nextEventTime;
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
-{
-    WRAP("fmi3EnterContinuousTimeMode");
-    return st(fmi2EnterContinuousTimeMode(w->inner));
-}
-
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
-                                       fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                                       fmi3Boolean *enterEventMode,
-                                       fmi3Boolean *terminateSimulation)
-{
-    fmi2Boolean enter = fmi2False, stop = fmi2False;
-    fmi2Status s;
-    WRAP("fmi3CompletedIntegratorStep");
-    if (!enterEventMode || !terminateSimulation) {
-        return FAIL(w, "fmi3CompletedIntegratorStep: NULL output argument");
-    }
-    s = fmi2CompletedIntegratorStep(w->inner, noSetFMUStatePriorToCurrentPoint, &enter, &stop);
-    *enterEventMode = enter != fmi2False;
-    *terminateSimulation = stop != fmi2False;
-    return st(s);
-}
-
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
-{
-    WRAP("fmi3SetTime");
-    return st(fmi2SetTime(w->inner, time));
-}
-
-fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
-                                   size_t nContinuousStates)
-{
-    WRAP("fmi3SetContinuousStates");
-    return st(fmi2SetContinuousStates(w->inner, continuousStates, nContinuousStates));
-}
-
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
-                                             size_t nContinuousStates)
-{
-    WRAP("fmi3GetContinuousStateDerivatives");
-    return st(fmi2GetDerivatives(w->inner, derivatives, nContinuousStates));
-}
-
-fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
-                                  size_t nEventIndicators)
-{
-    WRAP("fmi3GetEventIndicators");
-    return st(fmi2GetEventIndicators(w->inner, eventIndicators, nEventIndicators));
-}
-
-fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
-                                   size_t nContinuousStates)
-{
-    WRAP("fmi3GetContinuousStates");
-    return st(fmi2GetContinuousStates(w->inner, continuousStates, nContinuousStates));
-}
-
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
-                                             size_t nContinuousStates)
-{
-    WRAP("fmi3GetNominalsOfContinuousStates");
-    return st(fmi2GetNominalsOfContinuousStates(w->inner, nominals, nContinuousStates));
-}
-
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
-{
-    WRAP("fmi3GetNumberOfEventIndicators");
-    if (!nEventIndicators) {
-        return FAIL(w, "fmi3GetNumberOfEventIndicators: NULL output argument");
-    }
-#ifdef MODEL_EXCHANGE
-    *nEventIndicators = N_EVENT_INDICATORS;
-#else
-    *nEventIndicators = 0;
-#endif
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates)
-{
-    WRAP("fmi3GetNumberOfContinuousStates");
-    if (!nContinuousStates) {
-        return FAIL(w, "fmi3GetNumberOfContinuousStates: NULL output argument");
-    }
-#ifdef MODEL_EXCHANGE
-    *nContinuousStates = N_STATES;
-#else
-    *nContinuousStates = 0;
-#endif
-    return fmi3OK;
-}
-
 /* --- Co-Simulation ---------------------------------------------------------------------------- */
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
@@ -1049,5 +608,5 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                     w->reached);
     }
     *lastSuccessfulTime = w->inner->s.last_time;
-    return st(s);
+    return status3(s);
 }

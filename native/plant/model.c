@@ -301,6 +301,14 @@ static int inverse_kinematics(const ArmParams *p, double x, double y, double phi
 
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
 
+/* The plant has no tunable parameters: the glue refuses every parameter set after
+ * initialization before asking this. */
+int model_check_tunable(const Data *d, char *msg)
+{
+    (void)d;
+    return fail(msg, "the plant has no tunable parameters");
+}
+
 int model_initialize(Data *d, char *msg)
 {
     ModelState *m = &d->m;

@@ -284,7 +284,11 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
                 return ERROR(inst, "variable %s is computed by the model: it cannot be set",
                              v->name);
             }
-            if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION) {
+            /* FMI 2.0: after initialization only tunable parameters may be set, between
+             * steps (co-simulation) or in Event Mode (Model Exchange) */
+            if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION &&
+                !(v->tunable &&
+                  (inst->s.phase == S_STEP_COMPLETE || inst->s.phase == S_EVENT_MODE))) {
                 return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
                              v->name);
             }
@@ -303,6 +307,16 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
         return me_update(inst);
     }
     return fmi2OK;
+}
+
+static int sets_parameter(const fmi2ValueReference vr[], size_t nvr)
+{
+    for (size_t k = 0; k < nvr; k++) {
+        if (VARS[vr[k]].causality == C_PARAMETER) {
+            return 1;
+        }
+    }
+    return 0;
 }
 
 static void mark_dirty(Instance *inst)
@@ -382,6 +396,15 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
             return ERROR(inst, "input %s is not finite (%g)", v->name, value[k]);
         }
         if (v->causality == C_PARAMETER && check_parameter((int)vr[k], value[k], inst->msg)) {
+            return ERROR(inst, "%s", inst->msg);
+        }
+    }
+    if (inst->s.phase > S_INITIALIZATION && sets_parameter(vr, nvr)) {
+        Data tmp = inst->s.d; /* tunable parameters: the model checks the new values */
+        for (size_t k = 0; k < nvr; k++) {
+            tmp.r[vr[k]] = value[k];
+        }
+        if (model_check_tunable(&tmp, inst->msg)) {
             return ERROR(inst, "%s", inst->msg);
         }
     }

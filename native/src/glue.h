@@ -33,6 +33,7 @@ typedef struct {
     const char *start_string; /* String start value */
     int has_min;
     double min;
+    int tunable; /* a parameter that may be set between steps (CS) or in Event Mode (ME) */
 } VarInfo;
 
 #include "config.h" /* N_VARS, VR_<name>, MODEL_IDENTIFIER_STR, VARS[] */
@@ -48,6 +49,9 @@ typedef struct {
 
 int model_initialize(Data *d, char *msg);
 int model_step(Data *d, double t, double h, char *msg);
+/* Check new values of tunable parameters (set into d after initialization); 0 if usable, else
+ * 1 with msg set. The model reads them from its next step on. */
+int model_check_tunable(const Data *d, char *msg);
 
 /* snprintf into msg (MSG_MAX bytes); returns 1 so models can write `return fail(msg, ...)` */
 int fail(char *msg, const char *fmt, ...);

@@ -165,3 +165,22 @@ def test_libcosim_runs_the_default_variant_of_the_multi_scenario_archive(fmu_dir
         assert list(system.parameter_sets) == list(SCENARIOS)
         result = Master(system, "observer", algorithm="jacobi", stop_time=0.25).run()
     assert max(np.max(np.abs(result[n] - theirs[n])) for n in SIGNALS) <= 1e-9
+
+
+def test_our_cli_runs_a_scenario_from_either_archive_form(archives, fmu_dir, tmp_path, capsys):
+    """--scenario picks a variant of the multi-scenario archive, or names the one scenario of a
+    scenario's own archive (another name there is one line of error)."""
+    from impedance_cosim.cli import main
+
+    runs = {}
+    for form, archive in (("variants", fmu_dir / "PaperScenario-native.ssp"),
+                          ("own", archives["difference"])):  # fmt: skip
+        out = tmp_path / form
+        args = ["run", "--ssp", str(archive), "--stop", "0.1", "--no-figures", "--out", str(out)]
+        assert main([*args, "--scenario", "difference"]) == 0
+        runs[form] = (out / "difference.csv").read_text()
+    assert runs["variants"] == runs["own"]
+    capsys.readouterr()
+    args = ["run", "--ssp", str(archives["difference"]), "--stop", "0.1", "--no-figures"]
+    assert main([*args, "--out", str(tmp_path / "x"), "--scenario", "observer"]) != 0
+    assert "no parameter set 'observer'" in capsys.readouterr().err

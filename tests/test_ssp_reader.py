@@ -575,3 +575,28 @@ def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
     assert not failures, failures[:3]
     assert outcomes["ok"] >= 5 and outcomes["SspError"] > 100, outcomes  # both paths exercised
     assert leftovers(private_tmp) == []
+
+
+# --- SSP variants: one system description per scenario -------------------------------------------
+
+
+def test_variant_ssds_are_the_scenarios(archive, tmp_path):
+    with read_ssp(archive) as desc:
+        assert desc.variants == {"observer": SSD, "difference": "difference.ssd",
+                                 "measured": "measured.ssd"}  # fmt: skip
+        difference = {p.name: p.value for p in desc.parameter_sets["difference"]}
+        assert difference["controller.velocity_source"] == "2"
+        assert difference["plant.wall_k"] == "10000.0"  # each component's binding, merged
+    with read_ssp(archive, ssd="difference.ssd") as desc:  # one named variant alone
+        assert list(desc.parameter_sets) == ["difference"]
+    refused(archive, r"has no system description 'nope.ssd' \(have \['SystemStructure.ssd', "
+            "'difference.ssd', 'measured.ssd'\\]\\)", ssd="nope.ssd")  # fmt: skip
+
+
+def test_a_variant_of_another_system_is_refused(archive, tmp_path):
+    def drop_tau3(data: bytes) -> bytes:  # a valid system alone, but not the default's
+        return re.sub(rb'<ssd:Connection startElement="controller" startConnector="tau3"[^>]*/>',
+                      b"", data)  # fmt: skip
+
+    bad = repack(archive, tmp_path / "variant.ssp", {"measured.ssd": drop_tau3})
+    refused(bad, "variant measured.ssd describes another system than SystemStructure.ssd")

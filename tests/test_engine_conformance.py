@@ -184,3 +184,20 @@ def test_our_cli_runs_a_scenario_from_either_archive_form(archives, fmu_dir, tmp
     args = ["run", "--ssp", str(archives["difference"]), "--stop", "0.1", "--no-figures"]
     assert main([*args, "--out", str(tmp_path / "x"), "--scenario", "observer"]) != 0
     assert "no parameter set 'observer'" in capsys.readouterr().err
+
+
+def test_every_ssd_and_ssv_validates_against_the_ssp_schemas():
+    """All system descriptions (the variants too) and parameter sets, against fmpy's SSP 1.0
+    XSDs (validate_tree raises on the first error)."""
+    from fmpy.ssp.ssd import validate_tree
+    from lxml import etree
+
+    from impedance_cosim.system import source_files
+
+    files = source_files()
+    assert sorted(n for n in files if n.endswith(".ssd")) == [
+        "SystemStructure.ssd", "difference.ssd", "measured.ssd"]  # fmt: skip
+    assert len([n for n in files if n.endswith(".ssv")]) == 2 * len(SCENARIOS)
+    for name, data in files.items():
+        kind = "Description" if name.endswith(".ssd") else "ParameterValues"
+        validate_tree(etree.fromstring(data), f"SystemStructure{kind}.xsd")

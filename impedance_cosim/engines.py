@@ -8,11 +8,12 @@ fmus/PaperScenario.ssp, read from libcosim's sources and checked on runs here:
   extracts it into a temporary folder and removes it again. Each component's instance name is its
   SSD name ("controller", "plant"); slave indices follow no documented order (here controller 0,
   plant 1), so look them up by name.
-- Parameters: libcosim applies only ParameterBindings inside a Component; the system-level bindings
-  of our SSD are silently ignored (no warning), and the C API cannot name a parameter set. Our
-  scenario sets the FMUs' start values, so nothing would show for "observer", but "difference"
-  would run as "observer". This function therefore reads the chosen set with our own
-  `read_ssp` and gives each value to libcosim as an initial value (set before initialization).
+- Parameters: libcosim applies only ParameterBindings inside a Component (system-level ones are
+  silently ignored) and reads only SystemStructure.ssd, and its C API cannot name a parameter set.
+  Our SSDs bind each scenario's set on the components, one scenario per SSD, so a scenario's own
+  archive (PaperScenario-<scenario>.ssp) runs as it is (parameter_set=None). Given a set name,
+  this function also reads that set with our own `read_ssp` (from any variant SSD) and gives
+  each value to libcosim as an initial value (set before initialization).
 - Time: integer nanoseconds. The step size must be a whole number of ns (0.0025 s = 2,500,000 ns);
   FMUs get t_i = (i * h_ns) / 1e9 and a step length t_{i+1} - t_i, both computed from the
   integers, so both can differ by an ulp from our master's t_0 + i * h and h.

@@ -313,6 +313,15 @@ static int inverse_kinematics(const ArmParams *p, double x, double y, double phi
 
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
 
+/* The plant has no tunable parameters (the glue refuses every parameter set after
+ * initialization): nothing beyond the glue's checks. */
+int model_check_tunable(const Data *d, char *msg)
+{
+    (void)d;
+    (void)msg;
+    return 0;
+}
+
 int model_initialize(Data *d, char *msg)
 {
     ModelState *m = &d->m;

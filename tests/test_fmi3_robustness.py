@@ -229,3 +229,16 @@ def test_fmi3_no_leaks_under_valgrind(fmi3_dir, tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "All heap blocks were freed" in done.stderr
     assert "ERROR SUMMARY: 0 errors" in done.stderr
+
+
+def test_tunable_gains_change_after_initialization_fixed_parameters_do_not(fmi3_dir):
+    """The controller's gains are tunable in its FMI 3.0 modelDescription too (issue 12's
+    tables): set in step mode they are taken; a fixed parameter is refused with its name."""
+    c = Fmu3(fmi3_dir / CONTROLLER)
+    assert {v.name: v.variability for v in c.md.modelVariables}["K1"] == "tunable"
+    c.init()
+    assert c.step(0.0) == 0
+    assert c.set64({"K1": 80.0}) == 0 and c.get64(["K1"])[1] == [80.0]
+    assert c.set64({"sample_period": 0.001}) == ERROR and "sample_period is fixed" in c.log[-1]
+    assert c.step(DT) == 0
+    c.close()

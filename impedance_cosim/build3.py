@@ -170,7 +170,7 @@ def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "pyt
             z.writestr(
                 _info(name, 0o755 if name.startswith("binaries/") else 0o644), contents[name]
             )
-        _add_documentation(z, xml, "pythonfmu")
+        _add_documentation(z, xml, "pythonfmu3")
     tmp_target.replace(target)
     return target
 

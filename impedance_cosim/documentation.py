@@ -29,7 +29,8 @@ font-family:serif;font-size:110%}pre,code{background:#f4f4f4}pre{padding:.4em}""
 
 def documentation_members(model_description: bytes, members: list[str], flavour: str) -> dict:
     """The documentation members of an FMU (name -> bytes) for its modelDescription.xml and the
-    names of its other members (binaries, sources); flavour is "pythonfmu" or "native C99"."""
+    names of its other members (binaries, sources); flavour is "pythonfmu", "pythonfmu3" or
+    "native C99"."""
     root = ET.fromstring(model_description)
     out = {
         INDEX: index_html(root, members, flavour).encode("utf-8"),
@@ -50,6 +51,12 @@ def external_dependencies(model_name: str, flavour: str) -> str:
             "A Python 3 host process (e.g. fmpy, libcosimpy, ecospy): the binaries are pythonfmu"
             " 0.7 wrappers that run resources/*.py in the Python of the process that loads them"
             " (standard library only). They do not load in C hosts: use the native FMUs there."
+        )
+    if flavour == "pythonfmu3":
+        lines.append(
+            "A Python 3 host process with FMI 3.0 support (e.g. fmpy): the binaries are pythonfmu3"
+            " 0.3.4 wrappers that run resources/*.py in the Python of the process that loads them"
+            " (standard library only). For C hosts use the native FMI 3.0 FMUs."
         )
     if model_name == "BridgePlant":
         lines.append(
@@ -223,8 +230,8 @@ def _run_section(root: ET.Element, flavour: str) -> str:
             "# fmi3ActivateModelPartition(instance, clock, t), get the outputs"
         )
     host = (
-        "This is the Python flavour (pythonfmu): it runs in a Python host process such as fmpy."
-        if flavour == "pythonfmu"
+        f"This is the Python flavour ({flavour}): it runs in a Python host process such as fmpy."
+        if flavour.startswith("pythonfmu")
         else "This is the native (C99) flavour: it loads in any FMI "
         + root.get("fmiVersion", "2.0")
         + " host, no Python needed."

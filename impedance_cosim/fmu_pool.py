@@ -6,7 +6,9 @@ results are the same bit for bit (tests/test_sweep_batch.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from impedance_cosim.fmu import FmuError, FmuInstance
 
@@ -26,15 +28,15 @@ class InstancePool:
         st = path.stat()
         return (str(path), st.st_mtime_ns, st.st_size, name)
 
-    def take(self, path: Path, name: str) -> FmuInstance:
-        """An instantiated FMU (not yet set up): a reset idle one, or a new one."""
+    def take(self, path: Path, name: str, opener: Callable[..., Any] = FmuInstance) -> Any:
+        """An instantiated FMU (not yet set up): a reset idle one, or opener(path, name)."""
         idle = self._idle.get(self._key(path, name))
         if idle:
             fmu = idle.pop()
             fmu.messages.clear()
             self.reused += 1
             return fmu
-        return FmuInstance(path, name)
+        return opener(path, name)
 
     def give(self, fmu: FmuInstance, clean: bool) -> None:
         """Back to the pool after a run: terminated (clean=True and no fatal status) instances

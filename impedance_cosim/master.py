@@ -32,7 +32,7 @@ import ctypes
 import math
 import sys
 import time as wallclock
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -40,6 +40,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from impedance_cosim import fastloop, realtime
+from impedance_cosim.fmi.variables import ENUMERATIONS
 from impedance_cosim.fmu import (
     STATUS,
     FmuError,
@@ -48,6 +49,7 @@ from impedance_cosim.fmu import (
     fmi_value,
     model_description,
 )
+from impedance_cosim.fmu3 import is_fmi3, open_fmu, ssp_type
 from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
 from impedance_cosim.realtime import RealtimeOptions
 from impedance_cosim.results import Feed, Sink, size_problem
@@ -98,7 +100,9 @@ def split_name(name: str) -> tuple[str, str]:
 def real_outputs(description: Any) -> list[str]:
     """Names of an FMU's Real outputs, in model order (the recorded signals)."""
     return [
-        v.name for v in description.modelVariables if v.causality == "output" and v.type == "Real"
+        v.name
+        for v in description.modelVariables
+        if v.causality == "output" and ssp_type(v.type) == "Real"
     ]
 
 
@@ -114,7 +118,7 @@ def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list
             continue
         if v.causality != c.kind:
             problems.append(f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD")
-        if v.type != c.type:
+        if ssp_type(v.type) != c.type:
             problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
         if c.type == "Real" and (v.unit or None) != (c.unit or None):
             problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
@@ -150,9 +154,17 @@ class Master:
         fmu_files: Mapping[str, Path] | None = None,
         loop: str = "auto",
         realtime: bool | RealtimeOptions = False,
+        step_times: Callable[[int], tuple[float, float]] | None = None,
+        zero_start_inputs: bool = False,
         instances: Any = None,
     ) -> None:
         self.system = system
+        # Another engine's conventions, to compare with it (Python loop only; engines.py has
+        # them): step_times(i) gives step i's start time and length (default t_0 + i h, h);
+        # zero_start_inputs: the first step's connected inputs are 0.0, not the initialized
+        # outputs (with Jacobi).
+        self.step_times = step_times
+        self.zero_start_inputs = zero_start_inputs
         self.algorithm = algorithm or system.algorithm or "gauss-seidel"
         if self.algorithm not in ALGORITHMS:
             raise MasterError(f"algorithm must be one of {ALGORITHMS} (got {self.algorithm!r})")
@@ -175,6 +187,11 @@ class Master:
         self.divergence_limit = divergence_limit
         if loop not in ("auto", "c", "python"):
             raise MasterError(f"loop must be auto, c or python (got {loop!r})")
+        if (step_times or zero_start_inputs) and (loop == "c" or realtime):
+            raise MasterError("step_times and zero_start_inputs need the Python loop")
+        if zero_start_inputs and self.algorithm != "jacobi":
+            raise MasterError("zero_start_inputs needs the Jacobi algorithm")
+        loop = "python" if step_times or zero_start_inputs else loop
         self.loop = loop
         self.realtime = realtime
         self.instances = instances  # an fmu_pool.InstancePool: reuse FMU instances across runs
@@ -254,7 +271,13 @@ class Master:
 
     @staticmethod
     def _value(v, value: Any, name: str) -> Any:
+        enum = ENUMERATIONS.get(getattr(v.declaredType, "name", ""))
         try:
+            if enum and isinstance(value, str) and not value.strip().lstrip("+-").isdigit():
+                try:  # an item name of our enumerations ("difference" for velocity_source)
+                    value = enum.value(value.strip())
+                except ValueError as exc:
+                    raise ValueError(f"variable {name}: {exc}") from None
             return fmi_value(v.type, value, name)
         except ValueError as exc:
             raise MasterError(str(exc)) from None
@@ -305,15 +328,18 @@ class Master:
         try:
             for name in self.order:
                 path = self.fmu_files[name]
-                fmu = self.instances.take(path, name) if self.instances else FmuInstance(path, name)
-                ordered.append(_Slot(name, fmu))
+                fmu = self.instances.take(path, name, open_fmu) if self.instances else None
+                ordered.append(_Slot(name, fmu or open_fmu(path, name)))
             self._wire(ordered)
             self._initialize(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
             error = self._check_row(names, data[0], t0)
-            fast = fastloop.load() if self.loop != "python" else None
+            fmi3 = [s.name for s in ordered if is_fmi3(s.fmu.description)]
+            if self.loop == "c" and fmi3:
+                raise MasterError(f"the C loop runs FMI 2.0 FMUs only ({', '.join(fmi3)}: 3.0)")
+            fast = fastloop.load() if self.loop != "python" and not fmi3 else None
             if self.loop == "c" and fast is None:
                 raise MasterError("the C loop cannot be compiled here (no C compiler?)")
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
@@ -384,19 +410,20 @@ class Master:
         h, t0 = self.step_size, self.start_time
         jacobi = self.algorithm == "jacobi"
         for i in range(first, first + count):
-            t = t0 + i * h
+            t, h_i = self.step_times(i) if self.step_times else (t0 + i * h, h)
             try:
                 if jacobi:
+                    zero = self.zero_start_inputs and i == 0
                     for s in ordered:
-                        s.write([ordered[j].values[k] for j, k in s.sources])
+                        s.write([0.0 if zero else ordered[j].values[k] for j, k in s.sources])
                     for s in ordered:
-                        s.fmu.step(t, h)
+                        s.fmu.step(t, h_i)
                     for s in ordered:
                         s.values = s.read()
                 else:
                     for s in ordered:
                         s.write([ordered[j].values[k] for j, k in s.sources])
-                        s.fmu.step(t, h)
+                        s.fmu.step(t, h_i)
                         s.values = s.read()
             except FmuError as exc:
                 return i - first, str(exc)

@@ -48,6 +48,11 @@ class ModelSlave:
     """Mixin for pythonfmu.Fmi2Slave (list it first among the bases)."""
 
     model_class: type[FmuModel]
+    # the exporter's API (pythonfmu 0.7 here; slave3.py swaps in pythonfmu3's for FMI 3.0)
+    _var_types: dict[str, Any] = _PY_VAR
+    _causality: Any = Fmi2Causality
+    _variability: Any = Fmi2Variability
+    _error_status: Any = Fmi2Status.error
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)  # type: ignore[call-arg]
@@ -64,7 +69,7 @@ class ModelSlave:
         self._start_time = 0.0
         self.model: FmuModel | None = None
         for v in self._table:
-            var_cls = _PY_VAR[v.type]
+            var_cls = self._var_types[v.type]
             if v.causality == "output":
                 index = len(self._outputs)
                 self._outputs.append(v.start)
@@ -73,12 +78,12 @@ class ModelSlave:
             else:
                 self._values[v.name] = v.start
                 getter = self._value_getter(v.name)
-                setter = self._value_setter(v.name, v.causality, _CONVERT[v.type])
+                setter = self._value_setter(v, _CONVERT[v.type])
             self.register_variable(
                 var_cls(
                     v.name,
-                    causality=getattr(Fmi2Causality, v.causality),
-                    variability=getattr(Fmi2Variability, v.fmi_variability),
+                    causality=getattr(self._causality, v.causality),
+                    variability=getattr(self._variability, v.fmi_variability),
                     description=v.description,
                     getter=getter,
                     setter=setter,
@@ -90,10 +95,22 @@ class ModelSlave:
     def _value_getter(self, name: str):
         return lambda: self._values[name]
 
-    def _value_setter(self, name: str, causality: str, convert):
+    def _value_setter(self, v: Any, convert):
+        name = v.name
+        tunable = v.causality == "parameter" and v.fmi_variability == "tunable"
+
         def setter(value: Any) -> None:
-            if causality == "parameter" and self._phase >= STEPPING:
-                self._fail(f"parameter {name} is fixed: it cannot be set after initialization")
+            if v.causality == "parameter" and self._phase >= STEPPING:
+                if not tunable or self._phase == TERMINATED or self.model is None:
+                    self._fail(f"parameter {name} is fixed: it cannot be set after initialization")
+                # FMI 2.0: a tunable parameter may be set between communication points; the
+                # model checks the new value and uses it from its next sample on.
+                params = {n: self._values[n] for n in self._params}
+                params[name] = convert(value)
+                try:
+                    self.model.tune(params)
+                except ModelError as exc:
+                    self._fail(str(exc))
             self._values[name] = convert(value)
             if self._phase <= INITIALIZING:
                 self._dirty = True
@@ -161,7 +178,7 @@ class ModelSlave:
         """Log an error through the FMU logger, and to stderr: pythonfmu 0.7 drops every log
         message (errors included) unless the host turned debug logging on."""
         text = f"{self.model_class.MODEL_NAME} '{self.instance_name}': {message}"
-        self.log(text, Fmi2Status.error)
+        self.log(text, self._error_status)
         print(f"error: {text}", file=sys.stderr, flush=True)
 
     def _fail(self, message: str) -> None:

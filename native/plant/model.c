@@ -313,6 +313,15 @@ static int inverse_kinematics(const ArmParams *p, double x, double y, double phi
 
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
 
+/* The plant has no tunable parameters (the glue refuses every parameter set after
+ * initialization): nothing beyond the glue's checks. */
+int model_check_tunable(const Data *d, char *msg)
+{
+    (void)d;
+    (void)msg;
+    return 0;
+}
+
 int model_initialize(Data *d, char *msg)
 {
     ModelState *m = &d->m;
@@ -349,7 +358,9 @@ int model_initialize(Data *d, char *msg)
     return 0;
 }
 
-int model_step(Data *d, double t, double h, char *msg)
+/* model_step; with reached (FMI 3 early return) it stops at the first contact switch inside the
+ * step, the switch then done, and says where it stopped (t + h when there was none). */
+static int plant_step(Data *d, double t, double h, double *reached, char *msg)
 {
     static const char *const inputs[3] = {"tau1", "tau2", "tau3"};
     ModelState *m = &d->m;
@@ -404,6 +415,10 @@ int model_step(Data *d, double t, double h, char *msg)
         }
         mode = !mode;
         switches += 1;
+        if (reached) { /* return early, at the switch (FMI 3 co-simulation only) */
+            t_end = t_cur;
+            break;
+        }
         if (switches > MAX_SWITCHES) {
             return fail(msg, "plant integration failed: contact chattering: more than %d switches"
                              " in a step", MAX_SWITCHES);
@@ -420,7 +435,20 @@ int model_step(Data *d, double t, double h, char *msg)
         return 1;
     }
     write_outputs(d);
+    if (reached) {
+        *reached = t_end;
+    }
     return 0;
+}
+
+int model_step(Data *d, double t, double h, char *msg)
+{
+    return plant_step(d, t, h, NULL, msg);
+}
+
+int model_step_early(Data *d, double t, double h, double *reached, char *msg)
+{
+    return plant_step(d, t, h, reached, msg);
 }
 
 int model_check_state(const Data *d, char *msg)

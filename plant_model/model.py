@@ -4,6 +4,8 @@ Plain numeric code behind the PumaPlant FMU. State: joint angles and velocities,
 mode, the integrator's step-size guess and the sensor-noise generator. Each do_step integrates
 eq. (1) with the torque held constant, using adaptive Dormand-Prince 5(4) and stopping exactly
 where the contact closes or opens, so the result does not depend on the communication step.
+(integrator = euler instead takes one explicit Euler step per communication step: a reproduction
+aid for the paper's Fig. 4, docs/stability.md, never a default.)
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
 from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
-from impedance_cosim.ode import IntegrationError, integrate
+from impedance_cosim.ode import IntegrationError, euler_step, integrate
 from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
 
 
@@ -28,6 +30,12 @@ class PlantSetup:
     y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
     phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
     elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
+    integrator: str = _p(
+        "dopri5",
+        "",
+        "Plant integrator (co-simulation): dopri5 (adaptive, the default) or euler (ONE explicit"
+        " Euler step per communication step: a reproduction aid for Fig. 4, not accurate)",
+    )
     q_quant: float = _p(
         0.0,
         "rad",
@@ -47,9 +55,15 @@ class PlantSetup:
     def validate(self) -> None:
         """Raise ValueError naming a bad setting."""
         check_fields(self)
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(
+                f"parameter integrator must be one of {', '.join(INTEGRATORS)}"
+                f" (got {self.integrator!r})"
+            )
 
 
 INPUTS = ("tau1", "tau2", "tau3")
+INTEGRATORS = ("dopri5", "euler")
 H0 = 1e-3  # s, the integrator's first step guess
 
 
@@ -158,6 +172,15 @@ class PlantModel(FmuModel):
 
         return g
 
+    def _euler_step(self, tau, mode: bool, y: tuple, h: float) -> tuple[tuple, bool]:
+        """integrator = euler: y + h f(y), one explicit Euler step over the whole communication
+        step in the contact mode at its start; the mode switches after it if its switching
+        function turned positive (no event location: a 1990s-style shortcut)."""
+        y_new = euler_step(self._rhs(tau, mode), y, h)
+        if self._event(mode)(y_new) > 0.0:
+            mode = not mode
+        return y_new, mode
+
     def _measure(self, q) -> tuple[float, float, float]:
         """Joint encoders: truth + Gaussian noise, then quantized to the resolution."""
         s = self.setup
@@ -184,7 +207,9 @@ class PlantModel(FmuModel):
         y = (*self.q, *self.qd)
         t_cur, mode, hh, switches = t, self.in_contact, self.h, 0
         try:
-            while True:
+            if self.setup.integrator == "euler":
+                y, mode = self._euler_step(inputs, mode, y, h)
+            while self.setup.integrator == "dopri5":
                 t_cur, y, hh, hit = integrate(
                     self._rhs(inputs, mode), t_cur, y, t_end, hh,
                     self.setup.rtol, self.setup.atol, self._event(mode),

@@ -299,6 +299,36 @@ static int inverse_kinematics(const ArmParams *p, double x, double y, double phi
     return 0;
 }
 
+/* PlantModel._euler_step (integrator = euler): one explicit Euler step over the communication
+ * step in the mode at its start; the mode switches after it if its switching function turned
+ * positive. A reproduction aid for Fig. 4, not a default. */
+static int euler_step(PlantCtx *c, double y[ODE_N], double h, int *mode, char *err)
+{
+    double y_new[ODE_N], g;
+    c->in_contact = *mode;
+    if (ode_euler_step(plant_rhs, c, y, h, y_new, err) || plant_event(c, y_new, &g, err)) {
+        return 1;
+    }
+    memcpy(y, y_new, sizeof y_new);
+    if (g > 0.0) {
+        *mode = !*mode;
+    }
+    return 0;
+}
+
+/* Python's PlantSetup.validate for the string parameter: 1 (message in msg) if unknown. */
+static int check_integrator(const Data *d, int *euler, char *msg)
+{
+    const char *name = d->s[VR_integrator];
+    if (strncmp(name, "dopri5", STRING_MAX) == 0 || strncmp(name, "euler", STRING_MAX) == 0) {
+        *euler = strncmp(name, "euler", STRING_MAX) == 0;
+        return 0;
+    }
+    /* Python's repr for a plain ASCII name without quotes (enough for a one-line message) */
+    return fail(msg, "parameter integrator must be one of dopri5, euler (got '%.*s')", STRING_MAX,
+                name);
+}
+
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
 
 int model_initialize(Data *d, char *msg)
@@ -307,6 +337,7 @@ int model_initialize(Data *d, char *msg)
     PlantCtx c;
     double q[3] = {0.0, 0.0, 0.0}, x, xd;
     char err[ODE_MSG_MAX];
+    int euler;
     read_ctx(d, &c);
     if (c.arm.a1 <= 0.0 || c.arm.a2 <= 0.0) {
         char s1[REPR], s2[REPR];
@@ -316,6 +347,9 @@ int model_initialize(Data *d, char *msg)
     }
     if (inverse_kinematics(&c.arm, d->r[VR_x0], d->r[VR_y0], d->r[VR_phi0], d->i[VR_elbow_up] != 0,
                            q, msg)) {
+        return 1;
+    }
+    if (check_integrator(d, &euler, msg)) {
         return 1;
     }
     memset(m, 0, sizeof *m);
@@ -345,8 +379,9 @@ int model_step(Data *d, double t, double h, char *msg)
     OdeResult res;
     double y[ODE_N], t_end, t_cur, hh, scale;
     char err[ODE_MSG_MAX], a[REPR], b[REPR];
-    int mode, switches = 0;
+    int mode, switches = 0, euler = 0;
     read_ctx(d, &c);
+    (void)check_integrator(d, &euler, msg); /* checked by model_initialize */
     for (int i = 0; i < 3; i++) {
         const double v = c.tau[i];
         if (!(v - v == 0.0)) { /* false for NaN and +-inf */
@@ -375,7 +410,10 @@ int model_step(Data *d, double t, double h, char *msg)
     t_cur = t;
     mode = m->in_contact;
     hh = m->h;
-    for (;;) {
+    if (euler && euler_step(&c, y, h, &mode, err)) {
+        return fail(msg, "plant integration failed: %s", err);
+    }
+    while (!euler) {
         c.in_contact = mode;
         if (ode_integrate(plant_rhs, plant_event, &c, t_cur, y, t_end, hh, d->r[VR_rtol],
                           d->r[VR_atol], ODE_TIME_TOL, &res, err)) {

@@ -87,8 +87,14 @@ def oscillation(t: np.ndarray, dev: np.ndarray) -> dict[str, Any]:
     return out
 
 
-def run_condition(system, condition: Condition, source: str, rate: float = 400.0,
-                  stop: float = 20.0, reference: np.ndarray | None = None) -> dict[str, Any]:  # fmt: skip
+def run_condition(
+    system,
+    condition: Condition,
+    source: str,
+    rate: float = 400.0,
+    stop: float = 20.0,
+    reference: np.ndarray | None = None,
+) -> dict[str, Any]:
     """One run (native master) of a condition with a velocity source: the table row and the
     signals the figure needs (time, true and fed-back x-velocity). reference: the x-velocity of
     a stable run (the oscillation is the deviation from it)."""

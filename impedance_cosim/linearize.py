@@ -132,16 +132,18 @@ def loop_radius(
     rate: float,
     algorithm: str,
     velocity: str,
-    point: str = "contact",
+    point: str | float = "contact",
     plant_parameters: dict[str, Any] | None = None,
     controller_parameters: dict[str, Any] | None = None,
     reference: dict[str, np.ndarray] | None = None,
 ) -> tuple[float, float | None]:
-    """Dominant |lambda| and its period (samples) of the loop linearised at a point."""
+    """Dominant |lambda| and its period (samples) of the loop linearised at a point (a name of
+    POINTS or a time in s)."""
     pp = plant_parameters or {}
     cp = {**(controller_parameters or {}), "velocity_source": velocity}
     ref = reference if reference is not None else reference_run(pp, {})
-    m = operating_point(POINTS[point], rate, algorithm, pp, cp, ref)
+    t_point = POINTS[point] if isinstance(point, str) else point
+    m = operating_point(t_point, rate, algorithm, pp, cp, ref)
     return dominant(jacobian(m, m.state()))
 
 

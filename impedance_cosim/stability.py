@@ -33,7 +33,7 @@ SENSORS: dict[str, dict[str, Any]] = {  # the levels of the sweeps' noise and qu
 QUANTITIES: dict[str, tuple[tuple[float, float], str, bool, float]] = {
     "rate": ((100.0, 1000.0), "high", False, 1.0),  # Hz, to 1 Hz
     "K": ((1.0, 1e5), "low", True, 0.01),  # 1/s at 400 Hz, to 1 %
-    "wall_k": ((1e3, 1e7), "low", True, 0.01),  # N/m at 400 Hz, to 1 %
+    "wall_k": ((1e3, 1e9), "low", True, 0.01),  # N/m at 400 Hz, to 1 %
 }
 RATE = 400.0  # Hz, where K and the wall stiffness are bisected
 

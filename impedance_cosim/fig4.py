@@ -38,7 +38,7 @@ CONDITIONS = (
     Condition(
         "euler",
         "(b) plant: one explicit Euler step per period",
-        overrides={"plant.integrator": "euler"},
+        overrides={"plant.euler_substeps": 1},
     ),  # fmt: skip
     Condition(
         "encoder", "(c) PUMA encoders (1e-4 rad)", overrides={"plant.q_quant": PUMA_ENCODER_RAD}
@@ -52,7 +52,7 @@ CONDITIONS = (
         "euler_delay",
         "(a)+(b) Euler plant and one-sample delay",
         "jacobi",
-        {"plant.integrator": "euler"},
+        {"plant.euler_substeps": 1},
     ),  # fmt: skip
 )
 SOURCES = ("observer", "difference")

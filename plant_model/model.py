@@ -4,8 +4,8 @@ Plain numeric code behind the PumaPlant FMU. State: joint angles and velocities,
 mode, the integrator's step-size guess and the sensor-noise generator. Each do_step integrates
 eq. (1) with the torque held constant, using adaptive Dormand-Prince 5(4) and stopping exactly
 where the contact closes or opens, so the result does not depend on the communication step.
-(integrator = euler instead takes one explicit Euler step per communication step: a reproduction
-aid for the paper's Fig. 4, docs/stability.md, never a default.)
+(euler_substeps = n > 0 instead takes n explicit Euler steps per communication step: a
+reproduction aid for the paper's Fig. 4, docs/stability.md, never a default.)
 """
 
 from __future__ import annotations
@@ -30,11 +30,13 @@ class PlantSetup:
     y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
     phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
     elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
-    integrator: str = _p(
-        "dopri5",
+    euler_substeps: int = _p(
+        0,
         "",
-        "Plant integrator (co-simulation): dopri5 (adaptive, the default) or euler (ONE explicit"
-        " Euler step per communication step: a reproduction aid for Fig. 4, not accurate)",
+        "Plant integrator (co-simulation): 0 = adaptive Dormand-Prince 5(4), the default; n > 0 ="
+        " n explicit Euler steps per communication step, no event location (a reproduction aid"
+        " for the paper's Fig. 4, not accurate)",
+        0,
     )
     q_quant: float = _p(
         0.0,
@@ -55,15 +57,15 @@ class PlantSetup:
     def validate(self) -> None:
         """Raise ValueError naming a bad setting."""
         check_fields(self)
-        if self.integrator not in INTEGRATORS:
+        if self.euler_substeps > MAX_EULER_SUBSTEPS:
             raise ValueError(
-                f"parameter integrator must be one of {', '.join(INTEGRATORS)}"
-                f" (got {self.integrator!r})"
+                f"parameter euler_substeps must be <= {MAX_EULER_SUBSTEPS}"
+                f" (got {self.euler_substeps})"
             )
 
 
 INPUTS = ("tau1", "tau2", "tau3")
-INTEGRATORS = ("dopri5", "euler")
+MAX_EULER_SUBSTEPS = 1_000_000  # per communication step (euler_substeps)
 H0 = 1e-3  # s, the integrator's first step guess
 
 
@@ -172,14 +174,16 @@ class PlantModel(FmuModel):
 
         return g
 
-    def _euler_step(self, tau, mode: bool, y: tuple, h: float) -> tuple[tuple, bool]:
-        """integrator = euler: y + h f(y), one explicit Euler step over the whole communication
-        step in the contact mode at its start; the mode switches after it if its switching
-        function turned positive (no event location: a 1990s-style shortcut)."""
-        y_new = euler_step(self._rhs(tau, mode), y, h)
-        if self._event(mode)(y_new) > 0.0:
-            mode = not mode
-        return y_new, mode
+    def _euler_steps(self, tau, mode: bool, y: tuple, h: float, n: int) -> tuple[tuple, bool]:
+        """euler_substeps = n: n explicit Euler steps y + (h/n) f(y), each in the contact mode
+        at its start; the mode switches after a step if its switching function turned positive
+        (no event location: a 1990s-style shortcut)."""
+        dt = h / n
+        for _ in range(n):
+            y = euler_step(self._rhs(tau, mode), y, dt)
+            if self._event(mode)(y) > 0.0:
+                mode = not mode
+        return y, mode
 
     def _measure(self, q) -> tuple[float, float, float]:
         """Joint encoders: truth + Gaussian noise, then quantized to the resolution."""
@@ -207,9 +211,9 @@ class PlantModel(FmuModel):
         y = (*self.q, *self.qd)
         t_cur, mode, hh, switches = t, self.in_contact, self.h, 0
         try:
-            if self.setup.integrator == "euler":
-                y, mode = self._euler_step(inputs, mode, y, h)
-            while self.setup.integrator == "dopri5":
+            if self.setup.euler_substeps > 0:
+                y, mode = self._euler_steps(inputs, mode, y, h, self.setup.euler_substeps)
+            while self.setup.euler_substeps == 0:
                 t_cur, y, hh, hit = integrate(
                     self._rhs(inputs, mode), t_cur, y, t_end, hh,
                     self.setup.rtol, self.setup.atol, self._event(mode),

@@ -21,6 +21,7 @@
 #define H0 1e-3            /* s, the integrator's first step guess */
 #define MAX_SWITCHES 1000  /* contact mode switches per communication step */
 #define REPR 40            /* buffer size for py_float_repr */
+#define MAX_EULER_SUBSTEPS 1000000 /* per communication step (PlantModel's MAX_EULER_SUBSTEPS) */
 
 /* What the right-hand side and the event function need (PlantModel._rhs / _event closures). */
 typedef struct {
@@ -299,34 +300,27 @@ static int inverse_kinematics(const ArmParams *p, double x, double y, double phi
     return 0;
 }
 
-/* PlantModel._euler_step (integrator = euler): one explicit Euler step over the communication
- * step in the mode at its start; the mode switches after it if its switching function turned
- * positive. A reproduction aid for Fig. 4, not a default. */
-static int euler_step(PlantCtx *c, double y[ODE_N], double h, int *mode, char *err)
+/* PlantModel._euler_steps (euler_substeps = n > 0): n explicit Euler steps of h / n, each in the
+ * mode at its start; the mode switches after a step if its switching function turned positive.
+ * A reproduction aid for Fig. 4, not a default. */
+static int euler_steps(PlantCtx *c, double y[ODE_N], double h, int n, int *mode, char *err)
 {
-    double y_new[ODE_N], g;
-    c->in_contact = *mode;
-    if (ode_euler_step(plant_rhs, c, y, h, y_new, err) || plant_event(c, y_new, &g, err)) {
-        return 1;
-    }
-    memcpy(y, y_new, sizeof y_new);
-    if (g > 0.0) {
-        *mode = !*mode;
+    const double dt = h / (double)n;
+    for (int k = 0; k < n; k++) {
+        double y_new[ODE_N], g;
+        c->in_contact = *mode;
+        if (ode_euler_step(plant_rhs, c, y, dt, y_new, err)) {
+            return 1;
+        }
+        memcpy(y, y_new, sizeof y_new);
+        if (plant_event(c, y, &g, err)) {
+            return 1;
+        }
+        if (g > 0.0) {
+            *mode = !*mode;
+        }
     }
     return 0;
-}
-
-/* Python's PlantSetup.validate for the string parameter: 1 (message in msg) if unknown. */
-static int check_integrator(const Data *d, int *euler, char *msg)
-{
-    const char *name = d->s[VR_integrator];
-    if (strncmp(name, "dopri5", STRING_MAX) == 0 || strncmp(name, "euler", STRING_MAX) == 0) {
-        *euler = strncmp(name, "euler", STRING_MAX) == 0;
-        return 0;
-    }
-    /* Python's repr for a plain ASCII name without quotes (enough for a one-line message) */
-    return fail(msg, "parameter integrator must be one of dopri5, euler (got '%.*s')", STRING_MAX,
-                name);
 }
 
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
@@ -337,7 +331,6 @@ int model_initialize(Data *d, char *msg)
     PlantCtx c;
     double q[3] = {0.0, 0.0, 0.0}, x, xd;
     char err[ODE_MSG_MAX];
-    int euler;
     read_ctx(d, &c);
     if (c.arm.a1 <= 0.0 || c.arm.a2 <= 0.0) {
         char s1[REPR], s2[REPR];
@@ -349,8 +342,9 @@ int model_initialize(Data *d, char *msg)
                            q, msg)) {
         return 1;
     }
-    if (check_integrator(d, &euler, msg)) {
-        return 1;
+    if (d->i[VR_euler_substeps] > MAX_EULER_SUBSTEPS) { /* PlantSetup.validate */
+        return fail(msg, "parameter euler_substeps must be <= %d (got %d)", MAX_EULER_SUBSTEPS,
+                    (int)d->i[VR_euler_substeps]);
     }
     memset(m, 0, sizeof *m);
     m->t = d->start_time;
@@ -379,9 +373,9 @@ int model_step(Data *d, double t, double h, char *msg)
     OdeResult res;
     double y[ODE_N], t_end, t_cur, hh, scale;
     char err[ODE_MSG_MAX], a[REPR], b[REPR];
-    int mode, switches = 0, euler = 0;
+    int mode, switches = 0;
+    const int euler = (int)d->i[VR_euler_substeps];
     read_ctx(d, &c);
-    (void)check_integrator(d, &euler, msg); /* checked by model_initialize */
     for (int i = 0; i < 3; i++) {
         const double v = c.tau[i];
         if (!(v - v == 0.0)) { /* false for NaN and +-inf */
@@ -410,10 +404,10 @@ int model_step(Data *d, double t, double h, char *msg)
     t_cur = t;
     mode = m->in_contact;
     hh = m->h;
-    if (euler && euler_step(&c, y, h, &mode, err)) {
+    if (euler > 0 && euler_steps(&c, y, h, euler, &mode, err)) {
         return fail(msg, "plant integration failed: %s", err);
     }
-    while (!euler) {
+    while (euler == 0) {
         c.in_contact = mode;
         if (ode_integrate(plant_rhs, plant_event, &c, t_cur, y, t_end, hh, d->r[VR_rtol],
                           d->r[VR_atol], ODE_TIME_TOL, &res, err)) {
@@ -462,6 +456,10 @@ int model_me_check(const Data *d, char *msg)
                     " sampled-data effects of the co-simulation interface: set both to 0 or"
                     " use co-simulation",
                     d->r[VR_q_noise], d->r[VR_q_quant]);
+    }
+    if (d->i[VR_euler_substeps] != 0) {
+        return fail(msg, "euler_substeps = %d: under Model Exchange the host integrates the plant;"
+                         " set it to 0 or use co-simulation", (int)d->i[VR_euler_substeps]);
     }
     return 0;
 }

@@ -15,15 +15,16 @@ task on dask.distributed, the metrics of every run in one table, and maps of the
   every worker once; each worker process reads it once (cache by digest) and creates a Master per
   run. A run that fails or diverges is a row with its status and reason; so is a task whose
   worker died.
+- The table (sweep_table): every row written as its run finishes, resume, one writer per table;
+  the command line and Ctrl-C/SIGTERM handling: sweep_cli. A run stopped by a signal is not a
+  row (RunInterruptedError): the sweep stops.
 - Metrics per run (run_metrics): analysis.summary()'s numbers flattened, plus tracking error in
   contact, the time of first contact and the x-velocity jitter in free motion.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import csv
 import difflib
 import hashlib
 import itertools
@@ -43,6 +44,11 @@ from typing import Any
 import numpy as np
 
 from impedance_cosim.master import ALGORITHMS, Master, MasterError, RunResult
+from impedance_cosim.sweep_table import (  # noqa: F401 (read_table: API)
+    parse_value,
+    read_table,
+    save_figure,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_SSP = REPO / "fmus" / "PaperScenario-native.ssp"
@@ -88,6 +94,9 @@ DEFAULT_PLOTS = (
 )
 
 
+MAX_RUNS = 100_000  # planning alone configures one Master per run (~3 ms each)
+
+
 class SweepError(ValueError):
     """Bad sweep input (unknown parameter, empty grid, unreachable scheduler...): one line."""
 
@@ -107,18 +116,7 @@ class Plan:
     fixed: dict[str, Any] = field(default_factory=dict)
 
 
-def parse_value(text: str) -> Any:
-    """A command-line value: int, float or the text itself."""
-    text = text.strip()
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
-def parse_axis(item: str) -> tuple[str, Any]:
+def parse_axis(item: str, max_count: int = MAX_RUNS) -> tuple[str, Any]:
     """ "name=v1,v2" | "name=lin:a:b:n" | "name=log:a:b:n" -> (name, [values]);
     "name=range:a:b" | "name=logrange:a:b" -> (name, ("range"|"logrange", a, b)) for --random."""
     name, sep, spec = item.partition("=")
@@ -132,14 +130,18 @@ def parse_axis(item: str) -> tuple[str, Any]:
             numbers = [float(p) for p in parts]
         except ValueError:
             raise SweepError(f"{name}: bad {kind}: specification {spec!r}") from None
+        if not all(math.isfinite(v) for v in numbers):
+            raise SweepError(f"{name}: {kind}: needs finite numbers (got {spec!r})")
         if kind in ("range", "logrange"):
             if len(numbers) != 2 or not numbers[0] < numbers[1]:
                 raise SweepError(f"{name}: {kind}:LOW:HIGH needs LOW < HIGH (got {spec!r})")
             if kind == "logrange" and numbers[0] <= 0:
                 raise SweepError(f"{name}: logrange needs positive bounds (got {spec!r})")
             return name, (kind, *numbers)
-        if len(numbers) != 3 or not numbers[2].is_integer() or numbers[2] < 1:
-            raise SweepError(f"{name}: {kind}:START:STOP:COUNT needs a count >= 1 (got {spec!r})")
+        if len(numbers) != 3 or not numbers[2].is_integer() or not 1 <= numbers[2] <= max_count:
+            raise SweepError(
+                f"{name}: {kind}:START:STOP:COUNT needs a count 1..{max_count} (got {spec!r})"
+            )
         a, b, n = numbers[0], numbers[1], int(numbers[2])
         if kind == "log" and (a <= 0 or b <= 0):
             raise SweepError(f"{name}: log spacing needs positive bounds (got {spec!r})")
@@ -196,6 +198,8 @@ def resolve_name(name: str, known: Mapping[str, str], system) -> str:
 
 def _check_axis_values(name: str, values: Sequence[Any], system) -> None:
     for v in values:
+        if isinstance(v, float) and not math.isfinite(v):
+            raise SweepError(f"{name}: {v!r} is not a finite number")
         if name == "system.rate" and not (isinstance(v, int | float) and v > 0):
             raise SweepError(f"system.rate must be a positive number of Hz (got {v!r})")
         if name == "system.algorithm" and v not in ALGORITHMS:
@@ -284,8 +288,8 @@ def plan_sweep(
         fixed_values[name] = parse_value(value)
         _check_axis_values(name, [fixed_values[name]], system)
     if random_runs is not None:
-        if random_runs < 1:
-            raise SweepError(f"--random needs at least one run (got {random_runs})")
+        if not 1 <= random_runs <= MAX_RUNS:
+            raise SweepError(f"--random needs 1..{MAX_RUNS} runs (got {random_runs})")
         rng = random.Random(seed)
         points = []
         for _ in range(random_runs):
@@ -306,6 +310,9 @@ def plan_sweep(
             points.append(point)
         mode = "random"
     else:
+        runs = math.prod(len(v) for v in axes.values())
+        if runs > MAX_RUNS:
+            raise SweepError(f"the grid has {runs:.3g} runs, more than {MAX_RUNS}: fewer values")
         points = [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
         mode = "grid"
     nominal = Master(system, parameter_set=scenario)  # checks the scenario name
@@ -323,10 +330,10 @@ def plan_sweep(
         "plant_friction": friction,
     }
     for i, point in enumerate(points):
+        where = ", ".join(f"{k}={v}" for k, v in point.items())
         try:
-            Master(system, **master_arguments(point, options))
+            Master(system, **master_arguments(point, options))  # also refuses absurd run sizes
         except (MasterError, ValueError) as exc:
-            where = ", ".join(f"{k}={v}" for k, v in point.items())
             raise SweepError(f"run {i + 1} of {len(points)} ({where}): {exc}") from None
     return Plan(ssp=ssp, axes=axes, points=points, options=options, mode=mode, fixed=fixed_values)
 
@@ -404,8 +411,26 @@ def run_metrics(s: RunResult) -> dict[str, Any]:
     return out
 
 
+class RunInterruptedError(Exception):
+    """A run stopped by SIGINT/SIGTERM: no result; the sweep stops (--resume runs it again)."""
+
+
+class RunsLostError(Exception):
+    """Dask cancelled runs (e.g. the scheduler went away): no verdict on those points; the sweep
+    stops after the others (--resume runs them again)."""
+
+
+STOP: dict[str, str | None] = {"signal": None}  # set by the sweep's signal handler (sweep_cli)
+
+
+def _interrupted(error: str | None) -> bool:
+    """The master's error for a run it stopped on a signal (see cli/master: "interrupted ...")."""
+    return bool(error) and error.lower().startswith("interrupted")
+
+
 def run_point(payload: bytes | str, digest: str, point: dict, options: dict) -> dict[str, Any]:
-    """One run of the sweep -> its table row (never raises: failures are rows)."""
+    """One run of the sweep -> its table row (failures are rows); RunInterruptedError (or a
+    KeyboardInterrupt) when a signal stopped it, whatever the FMUs made of the signal."""
     started = time.perf_counter()
     row: dict[str, Any] = dict(point)
     row.update(status="ok", error="")
@@ -413,14 +438,20 @@ def run_point(payload: bytes | str, digest: str, point: dict, options: dict) -> 
     try:
         system = _system(payload, digest)
         result = Master(system, **master_arguments(point, options)).run()
+        if STOP["signal"] or _interrupted(result.error):
+            raise RunInterruptedError(result.error or f"interrupted ({STOP['signal']})")
         row["t_end_s"] = float(result.data[-1, 0]) if len(result.data) else None
         if result.ok:
             row.update(run_metrics(result))
         else:
             row["status"] = "diverged" if result.error.startswith("diverged") else "failed"
             row["error"] = result.error
+    except RunInterruptedError:
+        raise
     except Exception as exc:  # a row, never a crashed sweep
-        row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+        if STOP["signal"]:  # e.g. a Python FMU turned the KeyboardInterrupt into an FMI error
+            raise RunInterruptedError(f"interrupted ({STOP['signal']})") from None
+        row.update(status="failed", error=" ".join(f"{type(exc).__name__}: {exc}".split()))
     row["wall_s"] = time.perf_counter() - started
     return row
 
@@ -433,20 +464,37 @@ def _payload(ssp: Path) -> tuple[bytes, str]:
     return data, hashlib.sha256(data).hexdigest()
 
 
-def run_serial(plan: Plan, progress: Callable[[int, dict], None] | None = None) -> list[dict]:
-    """The plan's runs one after another in this process (the reference for the dask runs)."""
+Record = Callable[[int, dict], None]
+
+
+def run_serial(
+    plan: Plan,
+    progress: Callable[[int, dict], None] | None = None,
+    indices: Iterable[int] | None = None,
+    record: Record | None = None,
+) -> list[dict]:
+    """The plan's runs (or those at `indices`) one after another in this process (the reference
+    for the dask runs); `record(index, row)` as each finishes."""
     data, digest = _payload(plan.ssp)
     rows = []
-    for point in plan.points:
-        rows.append(run_point(data, digest, point, plan.options))
+    for i in range(len(plan.points)) if indices is None else indices:
+        rows.append(run_point(data, digest, plan.points[i], plan.options))
+        if record:
+            record(i, rows[-1])
         if progress:
             progress(len(rows), rows[-1])
     return rows
 
 
 def check_scheduler(address: str, timeout: float = 3.0) -> None:
-    """SweepError unless a TCP connection to the scheduler opens within timeout seconds."""
+    """SweepError unless a dask scheduler answers at address within timeout seconds (a TCP
+    connection, then dask's handshake and an identity call: a port that is not a scheduler fails
+    within the timeout instead of hanging)."""
+    import asyncio
+
+    from distributed.comm import connect
     from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.security import Security
 
     try:
         scheme, location = parse_address(address if "://" in address else f"tcp://{address}")
@@ -455,6 +503,7 @@ def check_scheduler(address: str, timeout: float = 3.0) -> None:
         raise SweepError(f"bad scheduler address {address!r}: {exc}") from None
     if scheme not in ("tcp", "tls"):
         raise SweepError(f"scheduler address {address!r}: only tcp:// and tls:// are supported")
+    started = time.monotonic()
     try:
         with socket.create_connection((host, port), timeout=timeout):
             pass
@@ -464,6 +513,30 @@ def check_scheduler(address: str, timeout: float = 3.0) -> None:
             f"cannot reach the dask scheduler at {address} ({reason}); is `dask scheduler` "
             "running there?"
         ) from None
+
+    async def identity() -> Any:
+        security = Security().get_connection_args("client")  # tls: dask's configured certificates
+        comm = await connect(f"{scheme}://{host}:{port}", timeout=timeout, **security)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    left = max(timeout - (time.monotonic() - started), 0.1)
+    try:
+        reply = asyncio.run(asyncio.wait_for(identity(), left))
+    except Exception as exc:  # e.g. MemoryError: garbage can ask for any amount of memory
+        if isinstance(exc, TimeoutError | asyncio.TimeoutError):
+            detail = f"no dask answer within {timeout:g} s"
+        else:
+            detail = f"its answer is not dask's: {type(exc).__name__}"
+    else:
+        kind = reply.get("type") if isinstance(reply, dict) else None
+        if kind == "Scheduler":
+            return
+        detail = f"it answers as {kind!r}"
+    raise SweepError(f"{address} accepts connections but is not a dask scheduler ({detail})")
 
 
 # Our local workers run one CPU-bound task at a time on few cores: slower housekeeping (ticks,
@@ -494,8 +567,12 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
             raise SweepError(
                 f"cannot connect to the dask scheduler at {scheduler}: {exc}"
             ) from None
-        with client:
-            yield client
+        logging.disable(logging.CRITICAL)  # a lost scheduler: our one line, not dask's tracebacks
+        try:
+            with client:
+                yield client
+        finally:
+            logging.disable(logging.NOTSET)
         return
     import dask
 
@@ -511,34 +588,63 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
         ) as cluster,
         Client(cluster) as client,
     ):
+        from impedance_cosim.sweep_worker import IgnoreSigint
+
+        client.register_plugin(IgnoreSigint())  # Ctrl-C is the main process's (sweep_worker)
         yield client
 
 
-def run_dask(plan: Plan, client, progress: Callable[[int, dict], None] | None = None) -> list[dict]:
-    """The plan's runs as tasks on the client's workers; rows in the plan's order."""
+def run_dask(
+    plan: Plan,
+    client,
+    progress: Callable[[int, dict], None] | None = None,
+    indices: Iterable[int] | None = None,
+    record: Record | None = None,
+) -> list[dict]:
+    """The plan's runs (or those at `indices`) as tasks on the client's workers; rows in the
+    plan's order; `record(index, row)` as each finishes. On an exception (e.g. Ctrl-C) the
+    runs not yet finished are cancelled."""
+    from concurrent.futures import CancelledError
+
     from distributed import as_completed
 
+    order = list(range(len(plan.points)) if indices is None else indices)
     data, digest = _payload(plan.ssp)
     payload = client.scatter(data, broadcast=True, hash=False)
     client.run(prepare_worker, data, digest)  # every worker prepares the system once
     futures = [
-        client.submit(run_point, payload, digest, point, plan.options, pure=False)
-        for point in plan.points
+        client.submit(run_point, payload, digest, plan.points[i], plan.options, pure=False)
+        for i in order
     ]
-    index = {f.key: i for i, f in enumerate(futures)}
-    rows: list[dict | None] = [None] * len(futures)
-    for future in as_completed(futures):
-        i = index[future.key]
-        try:
-            rows[i] = future.result()
-        except Exception as exc:  # the worker died (e.g. a crash inside an FMU)
-            row = dict(plan.points[i])
-            row.update(status="failed", error=f"task failed: {type(exc).__name__}: {exc}")
-            row.update({m: None for m in METRICS}, wall_s=None)
+    index = {f.key: i for f, i in zip(futures, order)}
+    rows: dict[int, dict] = {}
+    lost: list[str] = []
+    try:
+        for future in as_completed(futures):
+            i = index[future.key]
+            try:
+                row = future.result()
+            except RunInterruptedError:  # a worker's run was stopped by a signal: stop the sweep
+                raise
+            except CancelledError as exc:  # e.g. the scheduler went away: not the point's fault
+                lost.append(" ".join(str(exc).split()))
+                continue
+            except Exception as exc:  # the worker died (e.g. a crash inside an FMU)
+                row = dict(plan.points[i])
+                reason = " ".join(str(exc).split())
+                row.update(status="failed", error=f"task failed: {type(exc).__name__}: {reason}")
+                row.update({m: None for m in METRICS}, wall_s=None)
             rows[i] = row
-        if progress:
-            progress(sum(r is not None for r in rows), rows[i])
-    return rows  # type: ignore[return-value]
+            if record:
+                record(i, row)
+            if progress:
+                progress(len(rows), row)
+    finally:
+        if len(rows) + len(lost) < len(order):
+            client.cancel([f for f in futures if not f.done()])
+    if lost:
+        raise RunsLostError(f"dask lost {len(lost)} of {len(order)} runs ({lost[0]})")
+    return [rows[i] for i in order]
 
 
 class ProgressBar:
@@ -564,38 +670,12 @@ class ProgressBar:
         sys.stderr.flush()
 
 
-# --- the table ----------------------------------------------------------------------------------
+# --- the table (impedance_cosim.sweep_table) ------------------------------------------------------
 
 
 def columns(plan_axes: Iterable[str]) -> list[str]:
+    """The table's columns: run number, swept values, status, error, metrics, wall time."""
     return ["run", *plan_axes, "status", "error", *METRICS, "wall_s"]
-
-
-def write_table(path: Path, axes: Iterable[str], rows: list[dict]) -> None:
-    """The table as CSV: one row per run, floats with 17 significant digits, empty = undefined."""
-    names = columns(axes)
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(names)
-        for i, row in enumerate(rows, start=1):
-            cells = []
-            for n in names:
-                v = i if n == "run" else row.get(n)
-                cells.append("" if v is None else repr(v) if isinstance(v, float) else str(v))
-            w.writerow(cells)
-
-
-def read_table(path: Path) -> list[dict]:
-    """Rows of a sweep table (numbers parsed, empty cells None)."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    return [
-        {
-            k: (None if v == "" else v if k in ("status", "error") else parse_value(v))
-            for k, v in row.items()
-        }
-        for row in rows
-    ]
 
 
 # --- plots --------------------------------------------------------------------------------------
@@ -695,7 +775,7 @@ def plot_map(
             ax.set_xscale("log")
         ax.set_xlabel(x)
         ax.set_title(title, fontsize=10)
-        fig.savefig(path, dpi=90)
+        save_figure(fig, path, dpi=90)
         plt.close(fig)
         return
 
@@ -759,7 +839,7 @@ def plot_map(
     fig.suptitle(f"{title}\nblack, label in red: not bounded (stopped at that time)", fontsize=8)
     if image is not None:
         fig.colorbar(image, ax=grid, label=metric, shrink=0.8)
-    fig.savefig(path, dpi=80)
+    save_figure(fig, path, dpi=80)
     plt.close(fig)
 
 
@@ -828,6 +908,25 @@ STUDY = {
 }
 
 
+def sweep_table(path: Path, plan: Plan, resume: bool = False):
+    """The plan's table at path (rows written as runs finish; see sweep_table.SweepTable)."""
+    from impedance_cosim.sweep_table import SweepTable, plan_record
+
+    options = {k: v for k, v in plan.options.items() if k != "plant_friction"}
+    record = plan_record(_payload(plan.ssp)[1], plan.axes, plan.points, options, plan.mode)
+    return SweepTable(path, columns(plan.axes), record, plan.points, resume=resume)
+
+
+def run_plan(plan: Plan, table, client, progress: Callable[[int, dict], None] | None) -> list[dict]:
+    """The plan's runs not yet in the table, each row into the table as it finishes; all rows
+    (in the plan's order) once every run has finished."""
+    todo = [i for i in range(len(plan.points)) if i not in table.done]
+    if todo:
+        run = run_dask if client is not None else run_serial
+        run(plan, *([client] if client is not None else []), progress, todo, table.add)
+    return [dict(r) for r in table.rows()]
+
+
 def run_study(
     names: Sequence[str],
     out: Path,
@@ -835,8 +934,12 @@ def run_study(
     client_factory: Callable[[], Any] | None,
     progress: bool,
     stop: float | None = None,
+    resume: bool = False,
+    tables: list | None = None,
 ) -> list[Path]:
-    """Run the study's maps (all runs on one cluster), write map_<name>.csv and .png files."""
+    """Run the study's maps (all runs on one cluster), write map_<name>.csv and .png files;
+    with resume, the runs already in the tables are not run again; the tables opened are
+    appended to `tables` (to say how far an interrupted study got)."""
     from impedance_cosim.ssp import read_ssp
 
     system = read_ssp(ssp or DEFAULT_SSP)
@@ -849,211 +952,43 @@ def run_study(
         )
         for name in names
     }
-    total = sum(len(p.points) for p in plans.values())
-    bar = ProgressBar(total, progress)
-    done = 0
+    with contextlib.ExitStack() as open_tables:
+        opened = {
+            name: open_tables.enter_context(sweep_table(out / f"map_{name}.csv", plan, resume))
+            for name, plan in plans.items()
+        }
+        if tables is not None:
+            tables.extend(opened.values())
+        total = sum(len(p.points) - len(opened[n].done) for n, p in plans.items())
+        bar = ProgressBar(total, progress)
+        done = 0
 
-    def tick(_n: int, row: dict) -> None:
-        nonlocal done
-        done += 1
-        bar(done, row)
+        def tick(_n: int, row: dict) -> None:
+            nonlocal done
+            done += 1
+            bar(done, row)
 
+        results = {}
+        with contextlib.ExitStack() as stack:
+            client = stack.enter_context(client_factory()) if client_factory else None
+            for name, plan in plans.items():
+                results[name] = run_plan(plan, opened[name], client, tick)
     written = []
-    with contextlib.ExitStack() as stack:
-        client = stack.enter_context(client_factory()) if client_factory else None
-        for name, plan in plans.items():
-            rows = run_dask(plan, client, tick) if client else run_serial(plan, tick)
-            table = out / f"map_{name}.csv"
-            write_table(table, plan.axes, rows)
-            written.append(table)
-            for k, metric in enumerate(STUDY[name].plots):
-                png = out / (f"map_{name}.png" if k == 0 else f"map_{name}_{metric}.png")
-                title = (
-                    STUDY[name].title if k == 0 else f"{STUDY[name].title.split(':')[0]}: {metric}"
-                )
-                plot_map(rows, list(plan.axes), metric, png, title)
-                written.append(png)
+    for name, rows in results.items():
+        written.append(out / f"map_{name}.csv")
+        for k, metric in enumerate(STUDY[name].plots):
+            png = out / (f"map_{name}.png" if k == 0 else f"map_{name}_{metric}.png")
+            title = STUDY[name].title if k == 0 else f"{STUDY[name].title.split(':')[0]}: {metric}"
+            plot_map(rows, list(plans[name].axes), metric, png, title)
+            written.append(png)
     return written
 
 
-# --- command line -------------------------------------------------------------------------------
+# --- command line (impedance_cosim.sweep_cli) ----------------------------------------------------
 
 
 def add_parser(sub) -> None:
-    """Register `impedance-cosim sweep`."""
-    p = sub.add_parser(
-        "sweep",
-        help="parameter sweep on dask: metrics table (CSV) and maps (PNG)",
-        description="Run a grid (or seeded random sample) of co-simulations, one dask task per "
-        "run, and write one table of metrics plus maps. Parameters: component.variable (vector "
-        "shorthand controller.K = K1..K3), aliases and system.* pseudo-parameters "
-        "(--list-parameters).",
-    )
-    p.add_argument(
-        "--grid",
-        action="append",
-        metavar="NAME=VALUES",
-        default=[],
-        help="a swept parameter: v1,v2,... or lin:START:STOP:N or log:START:STOP:N; "
-        "with --random also range:LOW:HIGH or logrange:LOW:HIGH (repeatable)",
-    )
-    p.add_argument(
-        "--random",
-        type=int,
-        default=None,
-        metavar="N",
-        help="N seeded random points instead of the full grid",
-    )
-    p.add_argument("--seed", type=int, default=0, help="seed of --random (default 0)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a fixed parameter for every run (repeatable)",
-    )
-    p.add_argument(
-        "--ssp",
-        default=None,
-        help=f"system archive (default {DEFAULT_SSP.name}: the "
-        "native FMUs, built if missing or out of date)",
-    )
-    p.add_argument("--scenario", default=None, help="parameter set (default: the SSD's first)")
-    p.add_argument("--algorithm", choices=ALGORITHMS, default=None)
-    p.add_argument("--stop", type=float, default=None, help="stop time [s] (default 20)")
-    p.add_argument("--step", type=float, default=None, help="communication step [s] (1/400)")
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="an existing dask scheduler (tcp://host:8786); default: a LocalCluster",
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        help="LocalCluster worker processes (default: this machine's cores)",
-    )
-    p.add_argument(
-        "--connect-timeout",
-        type=float,
-        default=3.0,
-        help="seconds to reach the scheduler (default 3)",
-    )
-    p.add_argument("--serial", action="store_true", help="no dask: the runs in this process")
-    p.add_argument("--out", default="results/sweep", help="output folder (default results/sweep)")
-    p.add_argument(
-        "--plot",
-        action="append",
-        default=None,
-        metavar="METRIC",
-        help=f"metric to map (repeatable; default {', '.join(DEFAULT_PLOTS)})",
-    )
-    p.add_argument("--no-plots", action="store_true", help="only the table")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument(
-        "--study",
-        nargs="*",
-        choices=list(STUDY),
-        default=None,
-        metavar="MAP",
-        help=f"run the stability study's maps ({', '.join(STUDY)}; default all): "
-        "map_<name>.csv/.png into --out",
-    )
-    p.add_argument("--list-parameters", action="store_true", help="list the sweepable names")
-    p.set_defaults(func=_cmd_sweep)
+    """Register `impedance-cosim sweep` (its options and command live in sweep_cli)."""
+    from impedance_cosim.sweep_cli import add_parser as add
 
-
-def _default_ssp() -> Path:
-    from impedance_cosim.cli import _stale
-
-    if _stale(DEFAULT_SSP):
-        from impedance_cosim.build import build_all
-
-        print("building the FMUs and the system archives ...", file=sys.stderr)
-        build_all(DEFAULT_SSP.parent, None)
-    return DEFAULT_SSP
-
-
-def _cmd_sweep(args: argparse.Namespace) -> int:
-    if args.workers is not None and args.workers < 1:
-        raise SweepError(f"--workers must be >= 1 (got {args.workers})")
-    if args.scheduler and args.workers:
-        raise SweepError("--workers is for the LocalCluster; a --scheduler has its own workers")
-    for metric in args.plot or []:
-        if metric not in METRICS:
-            close = difflib.get_close_matches(metric, METRICS, n=3)
-            raise SweepError(
-                f"unknown metric {metric!r} (have {', '.join(METRICS)})"
-                + (f"; did you mean {', '.join(close)}?" if close else "")
-            )
-    if args.scheduler:  # before anything else: fail fast
-        check_scheduler(args.scheduler, args.connect_timeout)
-    ssp = Path(args.ssp) if args.ssp else None
-    if args.list_parameters:
-        from impedance_cosim.ssp import read_ssp
-
-        for name, text in known_parameters(read_ssp(ssp or _default_ssp())).items():
-            print(f"{name:28} {text}")
-        return 0
-    progress = sys.stderr.isatty() and not args.no_progress
-    out = Path(args.out)
-
-    def client():
-        return dask_client(args.scheduler, args.workers, args.connect_timeout)
-
-    factory = None if args.serial else client
-    if args.study is not None:
-        if args.grid or args.random is not None:
-            raise SweepError("--study runs its own grids: give it no --grid/--random")
-        names = args.study or list(STUDY)
-        ssp = ssp or _default_ssp()
-        out.mkdir(parents=True, exist_ok=True)
-        started = time.perf_counter()
-        written = run_study(names, out, ssp, factory, progress, stop=args.stop)
-        print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
-        for path in written:
-            print(f"  {path}")
-        return 0
-    if not args.grid:
-        raise SweepError("nothing to sweep: give at least one --grid component.variable=values")
-    for item in args.grid:
-        parse_axis(item)  # empty or malformed grids fail before the archive is read or built
-    plan = plan_sweep(
-        args.grid,
-        ssp=ssp or _default_ssp(),
-        random_runs=args.random,
-        seed=args.seed,
-        fixed=args.set,
-        scenario=args.scenario,
-        algorithm=args.algorithm,
-        stop=args.stop,
-        step=args.step,
-    )
-    out.mkdir(parents=True, exist_ok=True)
-    bar = ProgressBar(len(plan.points), progress)
-    started = time.perf_counter()
-    if factory is None:
-        rows = run_serial(plan, bar)
-    else:
-        with factory() as c:
-            rows = run_dask(plan, c, bar)
-    elapsed = time.perf_counter() - started
-    table = out / "sweep.csv"
-    write_table(table, plan.axes, rows)
-    bad = [r for r in rows if r["status"] != "ok"]
-    print(
-        f"{len(rows)} runs in {elapsed:.1f} s, {len(rows) - len(bad)} bounded, "
-        f"{len(bad)} not -> {table}"
-    )
-    for r in bad[:10]:
-        where = ", ".join(f"{k}={_label(r[k])}" for k in plan.axes)
-        print(f"  {where}: {r['status']}: {r['error']}")
-    if len(bad) > 10:
-        print(f"  ... and {len(bad) - 10} more (see the table)")
-    if not args.no_plots:
-        for metric in args.plot or DEFAULT_PLOTS:
-            path = out / f"sweep_{metric}.png"
-            plot_map(rows, list(plan.axes), metric, path, mode=plan.mode)
-            print(f"  {path}")
-    return 0
+    add(sub)

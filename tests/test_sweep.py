@@ -141,7 +141,7 @@ def no_cluster(monkeypatch):
         (["plant.noise_sd=0,1e-4"], "did you mean"),
         (["plant.x=0.3"], "plant.x is an output, not a parameter"),
         (["controller.K="], "empty grid for controller.K"),
-        (["controller.K=lin:1:2:0"], "needs a count >= 1"),
+        (["controller.K=lin:1:2:0"], "needs a count 1..100000"),
         ([], "nothing to sweep"),
         (["system.rate=333"], "not a whole number of"),
         (["system.rate=0"], "system.rate must be a positive number"),

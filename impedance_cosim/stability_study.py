@@ -264,7 +264,7 @@ def add_parser(sub) -> None:
 
 def _cmd_stability(args: argparse.Namespace) -> int:
     from impedance_cosim import fig4
-    from impedance_cosim.sweep import _default_ssp
+    from impedance_cosim.sweep_cli import _default_ssp
 
     args.parts = args.parts or list(PARTS)
     for part in args.parts:

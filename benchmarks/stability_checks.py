@@ -4,7 +4,9 @@
    20 s (native FMUs): how fuzzy the simulated boundary is;
 2. the linearised critical rate (contact point) with the impedance damping B halved, and the
    joint-velocity part of the unstable mode just below the critical rate: which mode limits the
-   true velocity and the observer.
+   true velocity and the observer;
+3. the linearised critical observer gain K at 400 Hz (free-motion and contact points) per timing
+   and observer discretization, to compare with the bisected ones in docs/boundaries.csv.
 
     python benchmarks/stability_checks.py
 """
@@ -56,6 +58,29 @@ def damping() -> None:
             )
 
 
+def gain_limits() -> None:
+    ref = lin.reference_run({}, {})
+    cases = [("gauss-seidel", "euler"), ("jacobi", "euler"), ("jacobi", "implicit"),
+             ("jacobi", "exponential"), ("gauss-seidel", "exponential")]  # fmt: skip
+    for timing, form in cases:
+        for point in lin.POINTS:
+
+            def radius(k: float, t=timing, f=form, p=point) -> float:
+                cp = {"K1": k, "K2": k, "K3": k, "observer_discretization": f}
+                return lin.loop_radius(400.0, t, "observer", p, controller_parameters=cp,
+                                       reference=ref)[0]  # fmt: skip
+
+            lo, hi = 50.0, 1e5
+            if radius(hi) <= 1.0:
+                print(f"{timing:12} {form:11} {point:7}: stable up to K = 1e5")
+                continue
+            while hi / lo > 1.001:
+                mid = (lo * hi) ** 0.5
+                lo, hi = (lo, mid) if radius(mid) > 1.0 else (mid, hi)
+            print(f"{timing:12} {form:11} {point:7}: linearised critical K = {lo:.1f}")
+
+
 if __name__ == "__main__":
     scan()
     damping()
+    gain_limits()

@@ -234,3 +234,32 @@ def test_bad_requests_are_one_line(tmp_path, args, message):
                            "--out", str(tmp_path)], capture_output=True, text=True)  # fmt: skip
     assert done.returncode == 2
     assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+# --- the observer discretizations -------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("form", "pole"),
+    [
+        ("euler", lambda kh: 1.0 - kh),
+        ("implicit", lambda kh: 1.0 / (1.0 + kh)),
+        ("exponential", lambda kh: math.exp(-kh)),
+    ],
+)
+@pytest.mark.parametrize("kh", [0.125, 0.9, 5.0])
+def test_observer_pole_of_each_discretization(form, pole, kh):
+    """Arm at rest, no gravity, friction, torque or force, angles unchanged: the observer's own
+    dynamics are yhat_i = pole(K h) yhat_i-1 (quadratic Coriolis terms vanish for a tiny yhat)."""
+    from controller_model.model import observer_update
+    from impedance_cosim.arm import Arm, ArmParams
+
+    arm = Arm(ArmParams(g=0.0, f1=0.0, f2=0.0, f3=0.0))
+    q = (0.3, -1.2, 0.9)
+    dt = 1 / 400
+    k = kh / dt
+    yhat = (1e-9, -2e-9, 3e-9)
+    z = (0.0, 0.0, 0.0)
+    got = observer_update(arm, yhat, q, q, z, z, (k, k, k), dt, form)
+    for y0, y1 in zip(yhat, got):
+        assert y1 / y0 == pytest.approx(pole(kh), rel=1e-6)

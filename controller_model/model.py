@@ -101,6 +101,13 @@ class ControllerParams:
     tau_max1: float = _p(200.0, "N.m", "Torque limit, joint 1 (when limit_torque)", 0.0)
     tau_max2: float = _p(100.0, "N.m", "Torque limit, joint 2 (when limit_torque)", 0.0)
     tau_max3: float = _p(50.0, "N.m", "Torque limit, joint 3 (when limit_torque)", 0.0)
+    max_samples_per_step: int = _p(
+        100_000,
+        "",
+        "Work bound of one communication step: most samples it may take; a longer step is"
+        " refused (fmi2Discard)",
+        1,
+    )
 
     POSITIVE = (
         "K1", "K2", "K3", "G1", "G2", "G3", "B1", "B2", "B3",
@@ -437,6 +444,12 @@ class ControllerModel(FmuModel):
         tol = TIME_TOL * ts
         t_end = t + h
         k, held = self.k_next, 0
+        n_max = self.ctrl.max_samples_per_step
+        if self.start_time + (k + n_max) * ts < t_end - tol:  # sample k + n_max would be taken
+            raise ModelError(
+                f"a communication step of {h} s from t={t} would take more than {n_max} samples"
+                " (parameter max_samples_per_step): take a smaller step"
+            )
         state = (self.yhat, self.q_prev, self.tau_prev, self.f_prev, self.out)
         # Every unprocessed sample t_k < t + h; all use the inputs given at t. Work on locals and
         # commit at the end, so a failed step (ModelError) leaves the model at the step's start.

@@ -305,4 +305,8 @@ def _one_line(exc: BaseException) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # Run the imported module's main, not this __main__ copy: otherwise CliError raised by other
+    # modules (impedance_cosim.cli.CliError) would be another class than the one caught here.
+    from impedance_cosim.cli import main as _main
+
+    sys.exit(_main())

@@ -53,6 +53,13 @@ class PlantSetup:
     noise_seed: int = _p(1, "", "Seed of the joint-angle noise generator (reproducible runs)")
     rtol: float = _p(1e-9, "1", "Integrator relative tolerance", 1e-14)
     atol: float = _p(1e-11, "1", "Integrator absolute tolerance (rad, rad/s)", 1e-16)
+    max_rhs_evaluations: int = _p(
+        200_000,
+        "",
+        "Work bound of one communication step: most evaluations of eq. (1) (about 6 per"
+        " integrator step); a step needing more is refused (fmi2Discard)",
+        1,
+    )
 
     def validate(self) -> None:
         """Raise ValueError naming a bad setting."""
@@ -147,11 +154,20 @@ class PlantModel(FmuModel):
         xd = -(s1 + s12 + s123) * qd[0] - (s12 + s123) * qd[1] - s123 * qd[2]
         return x, xd
 
-    def _rhs(self, tau, in_contact: bool):
-        """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1)."""
+    def _rhs(self, tau, in_contact: bool, budget: list[int] | None = None):
+        """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1).
+        budget[0], when given, counts the evaluations left in this communication step
+        (max_rhs_evaluations)."""
         arm, wall = self.arm, self.wall
 
         def f(y):
+            if budget is not None:
+                budget[0] -= 1
+            if budget is not None and budget[0] < 0:
+                raise IntegrationError(
+                    f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
+                    " one communication step (parameter max_rhs_evaluations): take a smaller step"
+                )
             q, qd = y[:3], y[3:]
             if in_contact:
                 x, xd = self._ee_x(q, qd)
@@ -174,13 +190,15 @@ class PlantModel(FmuModel):
 
         return g
 
-    def _euler_steps(self, tau, mode: bool, y: tuple, h: float, n: int) -> tuple[tuple, bool]:
+    def _euler_steps(
+        self, tau, mode: bool, y: tuple, h: float, n: int, budget: list[int]
+    ) -> tuple[tuple, bool]:
         """euler_substeps = n: n explicit Euler steps y + (h/n) f(y), each in the contact mode
         at its start; the mode switches after a step if its switching function turned positive
-        (no event location: a 1990s-style shortcut)."""
+        (no event location: a 1990s-style shortcut). Each step is one evaluation of budget."""
         dt = h / n
         for _ in range(n):
-            y = euler_step(self._rhs(tau, mode), y, dt)
+            y = euler_step(self._rhs(tau, mode, budget), y, dt)
             if self._event(mode)(y) > 0.0:
                 mode = not mode
         return y, mode
@@ -210,12 +228,14 @@ class PlantModel(FmuModel):
         t_end = t + h
         y = (*self.q, *self.qd)
         t_cur, mode, hh, switches = t, self.in_contact, self.h, 0
+        budget = [self.setup.max_rhs_evaluations]
         try:
             if self.setup.euler_substeps > 0:
-                y, mode = self._euler_steps(inputs, mode, y, h, self.setup.euler_substeps)
+                n = self.setup.euler_substeps
+                y, mode = self._euler_steps(inputs, mode, y, h, n, budget)
             while self.setup.euler_substeps == 0:
                 t_cur, y, hh, hit = integrate(
-                    self._rhs(inputs, mode), t_cur, y, t_end, hh,
+                    self._rhs(inputs, mode, budget), t_cur, y, t_end, hh,
                     self.setup.rtol, self.setup.atol, self._event(mode),
                 )  # fmt: skip
                 if not hit:

@@ -109,3 +109,22 @@ def test_results_csv_appears_only_when_closed(tmp_path):
         raise RuntimeError("stop")
     assert path.read_text() == f"time,x\n0.0,0.1\n0.5,{1 / 3!r}\n"
     assert list(tmp_path.iterdir()) == [path]
+
+
+@pytest.mark.parametrize("module", ["impedance_cosim", "impedance_cosim.cli"])
+def test_python_dash_m_reports_errors_of_other_modules_in_one_line(module, tmp_path):
+    """`python -m` runs the same main: a CliError raised in hil.py is a user error (exit 2), not an
+    'internal error' (it was another class when cli.py ran as __main__)."""
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-m", module, "swap", "--replace", "bogus", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2, done.stderr
+    assert lines == ["impedance-cosim swap: error: --replace expects component=path/to/file.fmu"
+                     " (got 'bogus')"]  # fmt: skip

@@ -172,7 +172,7 @@ class Native:
         for name, value in parameters.items():
             if isinstance(value, str):
                 lib.data_set_string(self.buf, VR[name], value.encode())
-            elif isinstance(value, bool):
+            elif isinstance(value, (bool, int)):  # Boolean and Integer parameters
                 self.i[VR[name]] = int(value)
             else:
                 self.r[VR[name]] = value
@@ -459,6 +459,30 @@ def test_infinite_step_refused(lib) -> None:
     assert model_error(lambda: nat.do_step(0.0, math.inf, INPUT_START)) == message
     py = ControllerModel({}, 0.0, INPUT_START)
     assert model_error(lambda: py.do_step(0.0, math.inf, INPUT_START)) == message
+
+
+@pytest.mark.parametrize(
+    ("n_max", "h", "refused"),
+    [(3, 3 * TS, False), (2, 3 * TS, True), (100_000, 1e6, True), (1, 1.5 * TS, True)],
+)
+def test_work_bound(lib, n_max: int, h: float, refused: bool) -> None:
+    """max_samples_per_step: the same boundary and message in both flavours; a refused step
+    changes nothing (it is refused before any sample is taken)."""
+    params = {"max_samples_per_step": n_max}
+    py = ControllerModel(params, 0.0, INPUT_START)
+    nat = Native(lib, params, 0.0, INPUT_START)
+    py.do_step(0.0, TS, INPUT_START)
+    nat.do_step(0.0, TS, INPUT_START)
+    before = nat.buf.raw
+    if not refused:
+        py.do_step(TS, h, INPUT_START)
+        nat.do_step(TS, h, INPUT_START)
+        assert np.array_equal(py.outputs(), nat.outputs()) and py.k_next == 1 + n_max
+        return
+    expected = model_error(lambda: py.do_step(TS, h, INPUT_START))
+    assert f"would take more than {n_max} samples (parameter max_samples_per_step)" in expected
+    assert model_error(lambda: nat.do_step(TS, h, INPUT_START)) == expected
+    assert nat.buf.raw == before
 
 
 def test_state_size(lib) -> None:

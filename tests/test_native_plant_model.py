@@ -402,14 +402,16 @@ def native_error(lib, parameters, steps=()) -> str:
         ({}, [(0.0, -DT, (0.0, 0.0, 0.0))]),
         ({}, [(0.0, math.nan, (0.0, 0.0, 0.0))]),
         ({}, [(0.0, DT, (0.0, 0.0, 0.0)), (0.5, DT, (0.0, 0.0, 0.0))]),
-        ({}, [(0.0, DT, (1e12, 0.0, 0.0))]),  # contact chattering
+        ({"max_rhs_evaluations": 10**8}, [(0.0, DT, (1e12, 0.0, 0.0))]),  # contact chattering
+        ({"max_rhs_evaluations": 50}, [(0.0, 1.0, (0.0, 0.0, 0.0))]),  # the work bound
+        ({"max_rhs_evaluations": 50, "euler_substeps": 51}, [(0.0, DT, (0.0, 0.0, 0.0))]),
         ({}, [(0.0, DT, (1e30, 0.0, 0.0))]),  # step size underflow
         ({"q_quant": 1e-320}, ()),  # round() of an infinite ratio
         ({}, [(0.0, math.inf, (0.0, 0.0, 0.0))]),  # an infinite step
     ],
 )
 def test_same_refusals(lib, parameters, steps):
-    params = {k: (float(v) if k != "noise_seed" else v) for k, v in parameters.items()}
+    params = {k: (float(v) if isinstance(v, float) else v) for k, v in parameters.items()}
     steps = [(t, h, tuple(float(v) for v in tau)) for t, h, tau in steps]
     py_msg, nat_msg = python_error(params, steps), native_error(lib, params, steps)
     assert nat_msg == py_msg
@@ -423,7 +425,7 @@ def test_math_domain_error_ends_the_step(lib):
 
 
 def test_refused_step_leaves_the_state(lib):
-    nat = NativePlant(lib)
+    nat = NativePlant(lib, {"max_rhs_evaluations": 10**8})
     nat.initialize()
     nat.do_step(0.0, DT, (1.0, 2.0, 3.0))
     before = nat.buf.raw

@@ -156,7 +156,8 @@ CASES = [
     ("python", ["--set", "controller.K=nan"], 1, "parameter K1 must be finite", 0),
     ("python", ["--set", "plant.m1=-1"], 1, "parameter m1 must be >= 0.0", 0),
     ("native", ["--set", "plant.m1=-1"], 1, "parameter m1 must be >= 0", 0),
-    ("python", ["--set", "controller.G=1e9"], 1, "contact chattering", 3),
+    # diverges: the plant refuses the step at its work bound (before 1000 contact switches)
+    ("python", ["--set", "controller.G=1e9"], 1, "(parameter max_rhs_evaluations)", 3),
     ("NaN in parameter set", [], 1, "parameter wall_k must be finite", 0),
     ("bad CRC", [], 2, "binaries/linux64/PumaPlant.so is corrupt (CRC check failed)", None),
     ("no binary", [], 2, "PumaPlant.fmu has no binary for this platform", None),

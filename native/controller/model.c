@@ -491,6 +491,17 @@ int model_step(Data *d, double t, double h, char *msg)
     }
     tol = TIME_TOL * p.ts;
     t_end = t + h;
+    {
+        const int n_max = d->i[VR_max_samples_per_step];
+        if (m->start_time + (double)(m->k_next + n_max) * p.ts < t_end - tol) {
+            float_repr(h, buf[0], sizeof buf[0]); /* sample k_next + n_max would be taken */
+            float_repr(t, buf[1], sizeof buf[1]);
+            return fail(msg,
+                        "a communication step of %s s from t=%s would take more than %d samples"
+                        " (parameter max_samples_per_step): take a smaller step",
+                        buf[0], buf[1], n_max);
+        }
+    }
     /* every unprocessed sample t_k < t + h, all on the inputs given at t (the glue discards d
      * when this fails, so the state may be updated sample by sample) */
     for (k = m->k_next; m->start_time + (double)k * p.ts < t_end - tol; k++) {
@@ -504,6 +515,35 @@ int model_step(Data *d, double t, double h, char *msg)
     m->k_next = k;
     m->held_input_samples += held;
     m->t = t_end;
+    return 0;
+}
+
+int model_check_state(const Data *d, char *msg)
+{
+    const ModelState *m = &d->m;
+    const char *source = d->s[VR_velocity_source];
+    if (!isfinite(m->t) || !isfinite(m->start_time)) {
+        return fail(msg, "controller time not finite");
+    }
+    /* k_next counts samples: 1 after initialization, and below 2^53 so k * Ts stays exact */
+    if (m->k_next < 1 || m->k_next > ((int64_t)1 << 53)) {
+        return fail(msg, "controller sample counter %lld out of range",
+                    (long long)m->k_next);
+    }
+    if (m->held_input_samples < 0 || m->held_input_samples >= m->k_next) {
+        return fail(msg, "controller held-sample counter %lld out of range",
+                    (long long)m->held_input_samples);
+    }
+    if (m->velocity_source < SOURCE_OBSERVER || m->velocity_source > SOURCE_MEASURED ||
+        strncmp(source, VELOCITY_SOURCES[m->velocity_source], STRING_MAX) != 0) {
+        return fail(msg, "controller velocity source %d does not match velocity_source",
+                    (int)m->velocity_source);
+    }
+    for (int i = 0; i < 3; i++) {
+        if (!isfinite(m->q_prev[i]) || !isfinite(m->f_prev[i])) {
+            return fail(msg, "controller's previous sample (angles, force) not finite");
+        }
+    }
     return 0;
 }
 

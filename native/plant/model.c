@@ -29,6 +29,9 @@ typedef struct {
     double wall_x, wall_k, wall_d;
     double tau[3];
     int in_contact;
+    int64_t *budget; /* evaluations of eq. (1) left in this step (max_rhs_evaluations), or NULL
+                        outside a co-simulation step (Model Exchange: one evaluation per call) */
+    int max_evaluations;
 } PlantCtx;
 
 static void read_arm(const Data *d, ArmParams *p)
@@ -65,6 +68,8 @@ static void read_ctx(const Data *d, PlantCtx *c)
     c->tau[1] = d->r[VR_tau2];
     c->tau[2] = d->r[VR_tau3];
     c->in_contact = d->m.in_contact;
+    c->budget = NULL; /* set by model_step */
+    c->max_evaluations = 0;
 }
 
 /* Python's math.sin / math.cos raise ValueError("math domain error") for an infinite argument,
@@ -149,6 +154,13 @@ static int plant_rhs(void *ctx, const double y[ODE_N], double out[ODE_N], char *
     const double q[3] = {y[0], y[1], y[2]};
     const double qd[3] = {y[3], y[4], y[5]};
     double net[3], qdd[3];
+    if (c->budget && --*c->budget < 0) {
+        snprintf(err, ODE_MSG_MAX,
+                 "more than %d evaluations of the dynamics in one communication step (parameter"
+                 " max_rhs_evaluations): take a smaller step",
+                 c->max_evaluations);
+        return 1;
+    }
     if (angles_infinite(q)) {
         return domain_error(err);
     }
@@ -375,7 +387,10 @@ int model_step(Data *d, double t, double h, char *msg)
     char err[ODE_MSG_MAX], a[REPR], b[REPR];
     int mode, switches = 0;
     const int euler = (int)d->i[VR_euler_substeps];
+    int64_t budget = d->i[VR_max_rhs_evaluations];
     read_ctx(d, &c);
+    c.budget = &budget;
+    c.max_evaluations = d->i[VR_max_rhs_evaluations];
     for (int i = 0; i < 3; i++) {
         const double v = c.tau[i];
         if (!(v - v == 0.0)) { /* false for NaN and +-inf */
@@ -437,6 +452,33 @@ int model_step(Data *d, double t, double h, char *msg)
         return 1;
     }
     write_outputs(d);
+    return 0;
+}
+
+int model_check_state(const Data *d, char *msg)
+{
+    const ModelState *m = &d->m;
+    const PyRandom *r = &m->rng;
+    if (!isfinite(m->t) || !(isfinite(m->h) && m->h > 0.0)) {
+        return fail(msg, "plant time or step-size guess not finite (or h <= 0)");
+    }
+    for (int i = 0; i < 3; i++) {
+        if (!isfinite(m->q[i]) || !isfinite(m->qd[i]) || !isfinite(m->q_meas[i])) {
+            return fail(msg, "plant joint %d angle, velocity or measurement not finite", i + 1);
+        }
+    }
+    if (m->in_contact != 0 && m->in_contact != 1) {
+        return fail(msg, "plant contact mode %d is not 0 or 1", (int)m->in_contact);
+    }
+    if (r->index < 0 || r->index > PYRANDOM_N) {
+        return fail(msg, "noise generator index %d is outside 0..%d", (int)r->index, PYRANDOM_N);
+    }
+    if (r->has_gauss_next != 0 && r->has_gauss_next != 1) {
+        return fail(msg, "noise generator flag %d is not 0 or 1", (int)r->has_gauss_next);
+    }
+    if (r->has_gauss_next && !isfinite(r->gauss_next)) {
+        return fail(msg, "noise generator's cached deviate is not finite");
+    }
     return 0;
 }
 

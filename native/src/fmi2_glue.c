@@ -18,7 +18,18 @@
 #include "guid.h" /* MODEL_GUID, written by the build */
 #include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is fmi2_me.c */
 
-#define SERIAL_MAGIC 0x494d5043u /* "IMPC" */
+#define SERIAL_MAGIC 0x494d5043u   /* "IMPC" */
+#define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
+#define STATE_MAGIC 0x494d5053u    /* "IMPS" */
+
+/* What fmi2GetFMUstate hands out: a Snapshot behind a tag that says whose it is, so that a
+ * foreign or freed pointer given back to fmi2SetFMUstate / fmi2FreeFMUstate is refused. */
+typedef struct {
+    unsigned magic; /* STATE_MAGIC while allocated; fmi2FreeFMUstate clears it */
+    unsigned n_vars;
+    char identifier[32];
+    Snapshot s;
+} StateBox;
 
 typedef struct {
     unsigned magic;
@@ -61,6 +72,25 @@ void log_message(Instance *inst, fmi2Status status, const char *category, const 
     }
     safe[k] = '\0';
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
+}
+
+/* A function this FMU does not provide: fmi2Error, logged when the instance is alive. */
+#define REFUSE(c, function, ...)                                                                   \
+    (instance_ok((Instance *)(c), function) ? ERROR((Instance *)(c), __VA_ARGS__) : fmi2Error)
+
+int instance_ok(const Instance *inst, const char *function)
+{
+    if (!inst) {
+        fprintf(stderr, "%s: %s called with a NULL instance: refused\n", MODEL_IDENTIFIER_STR,
+                function);
+        return 0;
+    }
+    if (inst->magic != INSTANCE_MAGIC) {
+        fprintf(stderr, "%s: %s called with a freed or foreign instance: refused\n",
+                MODEL_IDENTIFIER_STR, function);
+        return 0;
+    }
+    return 1;
 }
 
 static void set_start_values(Data *d)
@@ -136,6 +166,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                           "logStatusError", "%s", "out of memory");
         return NULL;
     }
+    inst->magic = INSTANCE_MAGIC;
     inst->cb = *functions;
     strncpy(inst->name, instanceName ? instanceName : "", sizeof inst->name - 1);
     inst->logging_on = loggingOn;
@@ -160,7 +191,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    free(c);
+    Instance *inst = (Instance *)c;
+    if (!instance_ok(inst, "fmi2FreeInstance")) {
+        return; /* freeing twice (or a foreign pointer) would corrupt the host's heap */
+    }
+    *(volatile unsigned *)&inst->magic = 0; /* volatile: a plain store before free() is dead */
+    free(inst);
 }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
@@ -168,7 +204,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 {
     (void)nCategories;
     (void)categories;
-    if (!c) {
+    if (!instance_ok((Instance *)c, "fmi2SetDebugLogging")) {
         return fmi2Error;
     }
     ((Instance *)c)->logging_on = loggingOn;
@@ -183,7 +219,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     (void)tolerance;
     (void)stopTimeDefined;
     (void)stopTime;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2SetupExperiment")) {
         return fmi2Error;
     }
     if (inst->s.phase != S_INSTANTIATED) {
@@ -201,7 +237,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2EnterInitializationMode")) {
         return fmi2Error;
     }
     if (inst->s.phase != S_INSTANTIATED) {
@@ -215,7 +251,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2ExitInitializationMode")) {
         return fmi2Error;
     }
     if (inst->s.phase != S_INITIALIZATION) {
@@ -231,7 +267,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 fmi2Status fmi2Terminate(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2Terminate")) {
         return fmi2Error;
     }
     if (inst->s.phase < S_STEP_COMPLETE || inst->s.phase == S_TERMINATED) {
@@ -244,7 +280,7 @@ fmi2Status fmi2Terminate(fmi2Component c)
 fmi2Status fmi2Reset(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2Reset")) {
         return fmi2Error;
     }
     set_start_values(&inst->s.d);
@@ -258,14 +294,18 @@ fmi2Status fmi2Reset(fmi2Component c)
 /* --- getters and setters ---------------------------------------------------------------------- */
 
 static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
-                               VarType type, int setting)
+                               const void *value, VarType type, int setting)
 {
     static const char *type_names[] = {"Real", "Integer", "Boolean", "String"};
-    if (!inst) {
+    static const char *getters[] = {"fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean",
+                                    "fmi2GetString"};
+    static const char *setters[] = {"fmi2SetReal", "fmi2SetInteger", "fmi2SetBoolean",
+                                    "fmi2SetString"};
+    if (!instance_ok(inst, setting ? setters[type] : getters[type])) {
         return fmi2Error;
     }
-    if (nvr > 0 && !vr) {
-        return ERROR(inst, "value reference array is NULL");
+    if (nvr > 0 && (!vr || !value)) {
+        return ERROR(inst, "value reference or value array is NULL");
     }
     for (size_t k = 0; k < nvr; k++) {
         if (vr[k] >= N_VARS) {
@@ -316,7 +356,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                        fmi2Real value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_REAL, 0);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_REAL, 0);
     if (status != fmi2OK) {
         return status;
     }
@@ -330,7 +370,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
                           fmi2Integer value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_INTEGER, 0);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_INTEGER, 0);
     if (status != fmi2OK) {
         return status;
     }
@@ -344,7 +384,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
                           fmi2Boolean value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_BOOLEAN, 0);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_BOOLEAN, 0);
     if (status != fmi2OK) {
         return status;
     }
@@ -358,7 +398,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
                          fmi2String value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_STRING, 0);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_STRING, 0);
     if (status != fmi2OK) {
         return status;
     }
@@ -372,7 +412,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                        const fmi2Real value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_REAL, 1);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_REAL, 1);
     if (status != fmi2OK) {
         return status;
     }
@@ -396,7 +436,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
                           const fmi2Integer value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_INTEGER, 1);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_INTEGER, 1);
     if (status != fmi2OK) {
         return status;
     }
@@ -417,7 +457,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
                           const fmi2Boolean value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_BOOLEAN, 1);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_BOOLEAN, 1);
     if (status != fmi2OK) {
         return status;
     }
@@ -432,7 +472,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
                          const fmi2String value[])
 {
     Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, T_STRING, 1);
+    fmi2Status status = check_access(inst, vr, nvr, value, T_STRING, 1);
     if (status != fmi2OK) {
         return status;
     }
@@ -459,12 +499,16 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     ModelState backup_m;
     double backup_r[N_VARS];
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2DoStep")) {
         return fmi2Error;
     }
     if (inst->s.phase != S_STEP_COMPLETE) {
         return ERROR(inst, "fmi2DoStep called before initialization finished or after "
                            "fmi2Terminate");
+    }
+    if (!isfinite(currentCommunicationPoint)) { /* NaN would pass the model's time check */
+        return ERROR(inst, "fmi2DoStep: communication point %g is not finite",
+                     currentCommunicationPoint);
     }
     /* A model step writes only the model state and the outputs: back those up, restore them if
      * the step is refused (cheaper than stepping a full copy of Data). */
@@ -473,7 +517,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     if (model_step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg)) {
         inst->s.d.m = backup_m;
         memcpy(inst->s.d.r, backup_r, sizeof backup_r);
-        log_message(inst, fmi2Discard, "logStatusError", "at t=%.17g: %s",
+        log_message(inst, fmi2Error, "logStatusError", "at t=%.17g: %s",
                     currentCommunicationPoint, inst->msg);
         inst->s.last_time = currentCommunicationPoint;
         return fmi2Discard;
@@ -484,54 +528,168 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
 
 fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    return ERROR((Instance *)c, "fmi2CancelStep: doStep never runs asynchronously");
+    return REFUSE(c, "fmi2CancelStep", "fmi2CancelStep: doStep never runs asynchronously");
 }
 
 /* --- FMU state -------------------------------------------------------------------------------- */
 
+/* A state from outside (fmi2DeSerializeFMUstate, or memory the host may have overwritten) before
+ * it becomes the instance's: every field the glue or the model reads is in range. Parameters
+ * pass the same checks as when they are set, inputs are finite, Booleans 0 or 1, strings
+ * NUL-terminated within STRING_MAX, times finite; the model's own state (counters, indices,
+ * enumerations) is checked by model_check_state once initialization has built it. */
+static int check_snapshot(const Snapshot *s, fmi2Type type, char *msg)
+{
+    const unsigned phase = (unsigned)s->phase;
+    const int me_phase = s->phase == S_EVENT_MODE || s->phase == S_CONTINUOUS_TIME;
+    int built;
+    if (phase > (unsigned)S_TERMINATED) {
+        return fail(msg, "phase %u is not a phase of the FMI state machine", phase);
+    }
+    if (me_phase != (type == fmi2ModelExchange) && s->phase != S_INSTANTIATED &&
+        s->phase != S_INITIALIZATION && s->phase != S_TERMINATED) {
+        return fail(msg, "phase %u belongs to the other interface (co-simulation / Model "
+                         "Exchange) than this instance's", phase);
+    }
+    if (s->me_time_set != 0 && s->me_time_set != 1) {
+        return fail(msg, "flag 'me_time_set' is %d, not 0 or 1", s->me_time_set);
+    }
+    if (!isfinite(s->me_time) || s->event_switches < 0 || s->event_switches > 1000) {
+        return fail(msg, "Model Exchange time not finite or event counter out of range");
+    }
+    if (s->dirty != 0 && s->dirty != 1) {
+        return fail(msg, "flag 'dirty' is %d, not 0 or 1", s->dirty);
+    }
+    if (!isfinite(s->last_time) || !isfinite(s->d.start_time)) {
+        return fail(msg, "a time is not finite");
+    }
+    for (int vr = 0; vr < N_VARS; vr++) {
+        const VarInfo *v = &VARS[vr];
+        if (v->type == T_STRING) {
+            if (!memchr(s->d.s[vr], '\0', STRING_MAX)) {
+                return fail(msg, "string %s is not NUL-terminated within %d bytes", v->name,
+                            STRING_MAX);
+            }
+            continue;
+        }
+        if (v->type == T_BOOLEAN && s->d.i[vr] != 0 && s->d.i[vr] != 1) {
+            return fail(msg, "Boolean %s is %d, not 0 or 1", v->name, s->d.i[vr]);
+        }
+        if (v->causality == C_PARAMETER &&
+            check_parameter(vr, v->type == T_REAL ? s->d.r[vr] : s->d.i[vr], msg)) {
+            return 1;
+        }
+        if (v->causality == C_INPUT && v->type == T_REAL && !isfinite(s->d.r[vr])) {
+            return fail(msg, "input %s is not finite (%g)", v->name, s->d.r[vr]);
+        }
+    }
+    built = s->phase >= S_STEP_COMPLETE || (s->phase == S_INITIALIZATION && !s->dirty);
+    /* (under Model Exchange, states and inputs may change the outputs after initialization:
+     * dirty is then legitimately 1 in event or continuous-time mode, with the model built) */
+    return built ? model_check_state(&s->d, msg) : 0;
+}
+
+/* A pointer from fmi2GetFMUstate / fmi2DeSerializeFMUstate of this FMU, not yet freed (as far
+ * as can be told: the same limits as instance_ok). */
+static int state_ok(Instance *inst, const StateBox *box, const char *function)
+{
+    if (box->magic != STATE_MAGIC || box->n_vars != N_VARS ||
+        strncmp(box->identifier, MODEL_IDENTIFIER_STR, sizeof box->identifier) != 0) {
+        log_message(inst, fmi2Error, "logStatusError",
+                    "%s: the FMU state is not a live state of this %s FMU (freed, foreign or "
+                    "overwritten): refused", function, MODEL_IDENTIFIER_STR);
+        return 0;
+    }
+    return 1;
+}
+
+/* *state itself when it is a live state, a new one when it is NULL, else NULL (logged). */
+static StateBox *state_for_writing(Instance *inst, fmi2FMUstate *state, const char *function)
+{
+    StateBox *box = (StateBox *)*state;
+    if (box) {
+        return state_ok(inst, box, function) ? box : NULL;
+    }
+    box = (StateBox *)calloc(1, sizeof(StateBox));
+    if (!box) {
+        log_message(inst, fmi2Error, "logStatusError", "out of memory for an FMU state");
+        return NULL;
+    }
+    box->magic = STATE_MAGIC;
+    box->n_vars = N_VARS;
+    strncpy(box->identifier, MODEL_IDENTIFIER_STR, sizeof box->identifier - 1);
+    *state = box;
+    return box;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
-    if (!inst || !state) {
+    StateBox *box;
+    if (!instance_ok(inst, "fmi2GetFMUstate")) {
         return fmi2Error;
     }
-    if (!*state) {
-        *state = malloc(sizeof(Snapshot));
-        if (!*state) {
-            return ERROR(inst, "out of memory for an FMU state");
-        }
+    if (!state) {
+        return ERROR(inst, "fmi2GetFMUstate: the state pointer is NULL");
     }
-    memcpy(*state, &inst->s, sizeof(Snapshot));
+    box = state_for_writing(inst, state, "fmi2GetFMUstate");
+    if (!box) {
+        return fmi2Error;
+    }
+    box->s = inst->s;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     Instance *inst = (Instance *)c;
-    if (!inst) {
+    const StateBox *box = (const StateBox *)state;
+    if (!instance_ok(inst, "fmi2SetFMUstate")) {
         return fmi2Error;
     }
-    if (!state) {
+    if (!box) {
         return ERROR(inst, "fmi2SetFMUstate: the state is NULL");
     }
-    memcpy(&inst->s, state, sizeof(Snapshot));
+    if (!state_ok(inst, box, "fmi2SetFMUstate")) {
+        return fmi2Error;
+    }
+    if (check_snapshot(&box->s, inst->type, inst->msg)) {
+        return ERROR(inst, "fmi2SetFMUstate: invalid FMU state (%s): refused", inst->msg);
+    }
+    inst->s = box->s;
     return fmi2OK;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    if (!c || !state) {
+    Instance *inst = (Instance *)c;
+    StateBox *box;
+    if (!instance_ok(inst, "fmi2FreeFMUstate")) {
         return fmi2Error;
     }
-    free(*state);
+    if (!state || !*state) {
+        return fmi2OK; /* FMI 2.0: a NULL state is ignored */
+    }
+    box = (StateBox *)*state;
+    if (!state_ok(inst, box, "fmi2FreeFMUstate")) {
+        return fmi2Error; /* freeing it could corrupt the host's heap */
+    }
+    *(volatile unsigned *)&box->magic = 0; /* volatile: see fmi2FreeInstance */
+    free(box);
     *state = NULL;
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    (void)state;
-    if (!c || !size) {
+    Instance *inst = (Instance *)c;
+    if (!instance_ok(inst, "fmi2SerializedFMUstateSize")) {
+        return fmi2Error;
+    }
+    if (!state || !size) {
+        return ERROR(inst, "fmi2SerializedFMUstateSize: NULL state or size");
+    }
+    if (!state_ok(inst, (const StateBox *)state, "fmi2SerializedFMUstateSize")) {
         return fmi2Error;
     }
     *size = sizeof(SerialHeader) + sizeof(Snapshot);
@@ -543,12 +701,15 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte s
 {
     Instance *inst = (Instance *)c;
     SerialHeader header;
-    if (!inst) {
+    if (!instance_ok(inst, "fmi2SerializeFMUstate")) {
         return fmi2Error;
     }
     if (!state || !serializedState || size < sizeof header + sizeof(Snapshot)) {
         return ERROR(inst, "fmi2SerializeFMUstate: NULL state or buffer smaller than %lu bytes",
                      (unsigned long)(sizeof header + sizeof(Snapshot)));
+    }
+    if (!state_ok(inst, (const StateBox *)state, "fmi2SerializeFMUstate")) {
+        return fmi2Error;
     }
     memset(&header, 0, sizeof header);
     header.magic = SERIAL_MAGIC;
@@ -556,7 +717,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte s
     header.size = sizeof(Snapshot);
     strncpy(header.identifier, MODEL_IDENTIFIER_STR, sizeof header.identifier - 1);
     memcpy(serializedState, &header, sizeof header);
-    memcpy(serializedState + sizeof header, state, sizeof(Snapshot));
+    memcpy(serializedState + sizeof header, &((const StateBox *)state)->s, sizeof(Snapshot));
     return fmi2OK;
 }
 
@@ -565,8 +726,13 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 {
     Instance *inst = (Instance *)c;
     SerialHeader header;
-    if (!inst || !state) {
+    Snapshot body;
+    StateBox *box;
+    if (!instance_ok(inst, "fmi2DeSerializeFMUstate")) {
         return fmi2Error;
+    }
+    if (!state) {
+        return ERROR(inst, "fmi2DeSerializeFMUstate: the state pointer is NULL");
     }
     if (!serializedState || size != sizeof header + sizeof(Snapshot)) {
         return ERROR(inst, "serialized state has %lu bytes, expected %lu",
@@ -579,13 +745,15 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         return ERROR(inst, "serialized state is not from a %s FMU of this build",
                      MODEL_IDENTIFIER_STR);
     }
-    if (!*state) {
-        *state = malloc(sizeof(Snapshot));
-        if (!*state) {
-            return ERROR(inst, "out of memory for an FMU state");
-        }
+    memcpy(&body, serializedState + sizeof header, sizeof body);
+    if (check_snapshot(&body, inst->type, inst->msg)) {
+        return ERROR(inst, "serialized state refused: %s", inst->msg);
     }
-    memcpy(*state, serializedState + sizeof header, sizeof(Snapshot));
+    box = state_for_writing(inst, state, "fmi2DeSerializeFMUstate");
+    if (!box) {
+        return fmi2Error;
+    }
+    box->s = body;
     return fmi2OK;
 }
 
@@ -598,34 +766,37 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 {
     (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
         (void)dvUnknown;
-    return ERROR((Instance *)c, "directional derivatives are not provided");
+    return REFUSE(c, "fmi2GetDirectionalDerivative", "directional derivatives are not provided");
 }
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
 {
     (void)vr, (void)nvr, (void)order, (void)value;
-    return ERROR((Instance *)c, "input derivatives are not supported (canInterpolateInputs=false)");
+    return REFUSE(c, "fmi2SetRealInputDerivatives", "input derivatives are not supported (canInterpolateInputs=false)");
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                         const fmi2Integer order[], fmi2Real value[])
 {
     (void)vr, (void)nvr, (void)order, (void)value;
-    return ERROR((Instance *)c, "output derivatives are not provided");
+    return REFUSE(c, "fmi2GetRealOutputDerivatives", "output derivatives are not provided");
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
 {
     (void)s, (void)value;
-    return ERROR((Instance *)c, "fmi2GetStatus: no asynchronous step to report on");
+    return REFUSE(c, "fmi2GetStatus", "fmi2GetStatus: no asynchronous step to report on");
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
     Instance *inst = (Instance *)c;
-    if (!inst || !value) {
+    if (!instance_ok(inst, "fmi2GetRealStatus")) {
         return fmi2Error;
+    }
+    if (!value) {
+        return ERROR(inst, "fmi2GetRealStatus: value is NULL");
     }
     if (s != fmi2LastSuccessfulTime) {
         return ERROR(inst, "fmi2GetRealStatus supports fmi2LastSuccessfulTime only");
@@ -637,14 +808,17 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
 {
     (void)s, (void)value;
-    return ERROR((Instance *)c, "fmi2GetIntegerStatus: no integer status");
+    return REFUSE(c, "fmi2GetIntegerStatus", "fmi2GetIntegerStatus: no integer status");
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
     Instance *inst = (Instance *)c;
-    if (!inst || !value) {
+    if (!instance_ok(inst, "fmi2GetBooleanStatus")) {
         return fmi2Error;
+    }
+    if (!value) {
+        return ERROR(inst, "fmi2GetBooleanStatus: value is NULL");
     }
     if (s != fmi2Terminated) {
         return ERROR(inst, "fmi2GetBooleanStatus supports fmi2Terminated only");
@@ -656,5 +830,5 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
 {
     (void)s, (void)value;
-    return ERROR((Instance *)c, "fmi2GetStringStatus: no string status");
+    return REFUSE(c, "fmi2GetStringStatus", "fmi2GetStringStatus: no string status");
 }

@@ -52,7 +52,7 @@ fmi2Status me_update(Instance *inst)
 static Instance *me_instance(fmi2Component c, unsigned allowed, const char *function)
 {
     Instance *inst = (Instance *)c;
-    if (!inst) {
+    if (!instance_ok(inst, function)) {
         return NULL;
     }
     if (inst->type != fmi2ModelExchange) {

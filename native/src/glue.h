@@ -12,7 +12,9 @@
  * - model_step advances from t to t + h, writing only d->m and the outputs in d->r (parameters
  *   and inputs are read-only); the glue restores both when the step is refused, so the instance
  *   stays at the step's start.
- * Both return 0 on success, or 1 after writing a message that names the problem into msg.
+ * - model_step does a bounded amount of work: it refuses a step that would need more internal
+ *   steps or samples than the model's step-bound parameter allows.
+ * All return 0 on success, or 1 after writing a message that names the problem into msg.
  */
 #ifndef GLUE_H
 #define GLUE_H
@@ -48,6 +50,10 @@ typedef struct {
 
 int model_initialize(Data *d, char *msg);
 int model_step(Data *d, double t, double h, char *msg);
+/* A ModelState from outside (a deserialized FMU state), checked before the model may use it:
+ * every counter, index and enumeration in range, and the reals the model needs finite (the glue
+ * has checked the parameters and inputs in d). 0 if usable, else 1 with the reason in msg. */
+int model_check_state(const Data *d, char *msg);
 
 /* snprintf into msg (MSG_MAX bytes); returns 1 so models can write `return fail(msg, ...)` */
 int fail(char *msg, const char *fmt, ...);

@@ -34,6 +34,7 @@ typedef struct {
 } Snapshot; /* everything an FMU state holds */
 
 typedef struct {
+    unsigned magic; /* INSTANCE_MAGIC while alive; fmi2FreeInstance clears it */
     Snapshot s;
     fmi2CallbackFunctions cb;
     char name[128];
@@ -46,6 +47,15 @@ typedef struct {
 void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...);
 
 #define ERROR(inst, ...) (log_message((inst), fmi2Error, "logStatusError", __VA_ARGS__), fmi2Error)
+
+/* Every entry point first checks that c is a live instance of this FMU: not NULL, and carrying
+ * INSTANCE_MAGIC, which fmi2FreeInstance clears. This catches a second fmi2FreeInstance and most
+ * calls on a freed instance, but not all: once the allocator has reused the freed block for a new
+ * instance, a stale pointer to it looks valid again (and reading a freed block is itself undefined
+ * behaviour that merely happens to work with common allocators). The host's logger cannot be
+ * trusted for such a call (it lives in the instance), so the refusal goes to stderr. Returns 1
+ * for a live instance, else 0. */
+int instance_ok(const Instance *inst, const char *function);
 
 /* fmi2_me.c: after model_initialize under Model Exchange, check that the model's settings make
  * sense there and compute outputs and derivatives (0, or 1 with a message in msg). */

@@ -276,8 +276,10 @@ def _cmd_stability(args: argparse.Namespace) -> int:
             raise st.StabilityError(f"unknown condition {name!r} (have {names})")
     if args.workers is not None and args.workers < 1:
         raise st.StabilityError(f"--workers must be >= 1 (got {args.workers})")
-    if not (math.isfinite(args.stop) and args.stop > 0):
-        raise st.StabilityError(f"--stop must be a finite number > 0 (got {args.stop})")
+    if not (math.isfinite(args.stop) and args.stop >= 1 and args.stop.is_integer()):
+        raise st.StabilityError(  # so that every whole-Hz rate divides the run
+            f"--stop must be a whole number of seconds >= 1 (got {args.stop})"
+        )
     ssp = Path(args.ssp) if args.ssp else _default_ssp()
     if not ssp.is_file():
         raise FileNotFoundError(f"no system archive {ssp}")

@@ -225,7 +225,8 @@ def test_gain_table_reproduces(tmp_path):
     [
         (["nonsense"], "unknown part 'nonsense'"),
         (["fig4", "--condition", "moon"], "unknown condition 'moon'"),
-        (["gain", "--stop", "-1"], "--stop must be a finite number > 0"),
+        (["gain", "--stop", "-1"], "--stop must be a whole number of seconds >= 1"),
+        (["boundaries", "--stop", "2.5"], "--stop must be a whole number of seconds >= 1"),
         (["boundaries", "--ssp", "/nonexistent.ssp"], "no system archive"),
     ],
 )

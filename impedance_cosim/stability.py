@@ -195,6 +195,19 @@ def bisect_all(
     return [state[c] for c in todo]
 
 
+def check_cases(todo: list[Case], ssp: Path, options: dict[str, Any]) -> None:
+    """Configure (not run) a Master for both ends of every case, so that a parameter the system
+    lacks is one clear error now, not a bracket of "unstable" runs."""
+    from impedance_cosim.master import Master
+    from impedance_cosim.ssp import read_ssp
+    from impedance_cosim.sweep import master_arguments
+
+    system = read_ssp(ssp)
+    for case in todo:
+        for x in QUANTITIES[case.quantity][0]:
+            Master(system, **master_arguments(case.point(x), options))
+
+
 def run_study(
     todo: list[Case],
     ssp: Path,
@@ -209,6 +222,7 @@ def run_study(
     data = Path(ssp).read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     options = {"stop": stop, "divergence_limit": 1e6}
+    check_cases(todo, ssp, options)
     if client is None:
         queue: list[tuple[Case, float]] = []
 

@@ -264,3 +264,13 @@ def test_observer_pole_of_each_discretization(form, pole, kh):
     got = observer_update(arm, yhat, q, q, z, z, (k, k, k), dt, form)
     for y0, y1 in zip(yhat, got):
         assert y1 / y0 == pytest.approx(pole(kh), rel=1e-6)
+
+
+def test_a_parameter_the_system_lacks_is_an_error_before_any_run(monkeypatch):
+    """Not a bracket of "unstable" runs: the study refuses to start."""
+    from impedance_cosim.master import MasterError
+
+    case = stability.Case("rate", "observer", "gauss-seidel", "ideal")
+    monkeypatch.setitem(stability.SENSORS, "ideal", {"plant.no_such_thing": 1.0})
+    with pytest.raises(MasterError, match="unknown parameter plant.no_such_thing"):
+        stability.run_study([case], NATIVE_SSP)

@@ -25,13 +25,21 @@ velocity_source only selects which joint-velocity estimate feeds the impedance l
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
 
 from impedance_cosim.arm import Arm, ArmParams, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
+from impedance_cosim.fmi.variables import (
+    SAMPLED_INPUTS,
+    Enumeration,
+    ModelExchange,
+    Variable,
+    parameters_of,
+    vector,
+)
 from impedance_cosim.linalg3 import Vec3, matTvec, matvec, solve
 
 TWO_PI = 2.0 * math.pi
@@ -39,6 +47,15 @@ SINGULAR_TOL = 1e-6  # |det J| below SINGULAR_TOL * a1 * a2 (i.e. |sin q2| < 1e-
 TIME_TOL = 1e-9  # sample-time comparisons, relative to the sample period
 VELOCITY_SOURCES = ("observer", "difference", "measured")
 OBSERVER_DISCRETIZATIONS = ("euler", "implicit", "exponential")
+VELOCITY_SOURCE = Enumeration(
+    "VelocitySource",
+    "Joint velocity fed to the impedance law",
+    (
+        ("observer", "Reduced-order observer, eq. (9) (the paper)"),
+        ("difference", "Backward difference of the measured joint angles (Fig. 4 baseline)"),
+        ("measured", "The measured joint velocity, inputs qd_meas1..3 (ideal baseline)"),
+    ),
+)
 
 
 # --- parameters ---------------------------------------------------------------------------------
@@ -48,15 +65,23 @@ OBSERVER_DISCRETIZATIONS = ("euler", "implicit", "exponential")
 class TrajectoryParams:
     """The virtual trajectory of section 5: an ellipse truncated by (and pushed into) the wall."""
 
-    traj_cx: float = _p(0.5, "m", "Virtual-trajectory ellipse centre, x")
-    traj_cy: float = _p(0.0, "m", "Virtual-trajectory ellipse centre, y")
-    traj_ax: float = _p(0.2, "m", "Virtual-trajectory ellipse semi-axis along x", 0.0)
-    traj_ay: float = _p(0.5, "m", "Virtual-trajectory ellipse semi-axis along y", 0.0)
-    traj_f: float = _p(0.1, "Hz", "Virtual-trajectory frequency (one ellipse per 1/f)", 0.0)
-    traj_phi: float = _p(0.0, "rad", "Virtual end-effector orientation (constant)")
-    wall_x: float = _p(0.65, "m", "Where the ellipse's x reaches this, x_v switches into the wall")
+    traj_cx: float = _p(0.5, "m", "Virtual-trajectory ellipse centre, x", tunable=True)
+    traj_cy: float = _p(0.0, "m", "Virtual-trajectory ellipse centre, y", tunable=True)
+    traj_ax: float = _p(0.2, "m", "Virtual-trajectory ellipse semi-axis along x", 0.0, tunable=True)
+    traj_ay: float = _p(0.5, "m", "Virtual-trajectory ellipse semi-axis along y", 0.0, tunable=True)
+    traj_f: float = _p(
+        0.1, "Hz", "Virtual-trajectory frequency (one ellipse per 1/f)", 0.0, tunable=True
+    )
+    traj_phi: float = _p(0.0, "rad", "Virtual end-effector orientation (constant)", tunable=True)
+    wall_x: float = _p(
+        0.65, "m", "Where the ellipse's x reaches this, x_v switches into the wall", tunable=True
+    )
     wall_depth: float = _p(
-        0.00196, "m", "Depth of the switched x_v inside the wall (target force = k * depth)", 0.0
+        0.00196,
+        "m",
+        "Depth of the switched x_v inside the wall (target force = k * depth)",
+        0.0,
+        tunable=True,
     )
 
     def validate(self) -> None:
@@ -71,28 +96,41 @@ B_DEFAULT = 2.0 * math.sqrt(1000.0)  # section 5: B = 2 sqrt(1000) I
 class ControllerParams:
     """Observer and impedance gains, sampling, velocity source and torque limits (section 5)."""
 
-    K1: float = _p(50.0, "1/s", "Observer gain, joint 1 (K = diag(K1, K2, K3) > 0)", 0.0)
-    K2: float = _p(50.0, "1/s", "Observer gain, joint 2", 0.0)
-    K3: float = _p(50.0, "1/s", "Observer gain, joint 3", 0.0)
-    G1: float = _p(1000.0, "N/m", "Impedance stiffness along x (G = diag(G1, G2, G3) > 0)", 0.0)
-    G2: float = _p(1000.0, "N/m", "Impedance stiffness along y", 0.0)
-    G3: float = _p(1000.0, "N.m/rad", "Impedance stiffness about the orientation phi", 0.0)
-    B1: float = _p(B_DEFAULT, "N.s/m", "Impedance damping along x (B = diag(B1, B2, B3) > 0)", 0.0)
-    B2: float = _p(B_DEFAULT, "N.s/m", "Impedance damping along y", 0.0)
-    B3: float = _p(B_DEFAULT, "N.m.s/rad", "Impedance damping about phi", 0.0)
+    K1: float = _p(
+        50.0, "1/s", "Observer gain, joint 1 (K = diag(K1, K2, K3) > 0)", 0.0, tunable=True
+    )
+    K2: float = _p(50.0, "1/s", "Observer gain, joint 2", 0.0, tunable=True)
+    K3: float = _p(50.0, "1/s", "Observer gain, joint 3", 0.0, tunable=True)
+    G1: float = _p(
+        1000.0, "N/m", "Impedance stiffness along x (G = diag(G1, G2, G3) > 0)", 0.0, tunable=True
+    )
+    G2: float = _p(1000.0, "N/m", "Impedance stiffness along y", 0.0, tunable=True)
+    G3: float = _p(
+        1000.0, "N.m/rad", "Impedance stiffness about the orientation phi", 0.0, tunable=True
+    )
+    B1: float = _p(
+        B_DEFAULT,
+        "N.s/m",
+        "Impedance damping along x (B = diag(B1, B2, B3) > 0)",
+        0.0,
+        tunable=True,
+    )
+    B2: float = _p(B_DEFAULT, "N.s/m", "Impedance damping along y", 0.0, tunable=True)
+    B3: float = _p(B_DEFAULT, "N.m.s/rad", "Impedance damping about phi", 0.0, tunable=True)
     sample_period: float = _p(1 / 400, "s", "Controller sample period (outputs held between)", 0.0)
-    velocity_source: str = _p(
-        "observer",
+    velocity_source: int = _p(
+        1,
         "",
-        "Joint velocity fed to the impedance law: observer (eq. 9), difference (backward"
-        " difference of the measured angles) or measured (inputs qd_meas1..3)",
+        "Joint velocity fed to the impedance law: 1 observer (eq. 9), 2 difference (backward"
+        " difference of the measured angles) or 3 measured (inputs qd_meas1..3)",
+        enumeration=VELOCITY_SOURCE,
     )
     observer_discretization: str = _p(
         "euler",
         "",
-        "Observer update: euler (eq. 9 as printed, explicit; stable for K Ts < 2, in the loop"
-        " K Ts <= 0.5), implicit (the -K yhat term implicit) or exponential (-K yhat integrated"
-        " exactly over the sample; both stable for every K > 0)",
+        "Observer update: euler (eq. 9 as printed, explicit; in the paper's loop at 400 Hz"
+        " stable for K Ts <= 0.91), implicit (the -K yhat term implicit) or exponential (-K yhat"
+        " integrated exactly over the sample; both stable for every K > 0)",
     )
     yhat0_1: float = _p(0.0, "rad/s", "Observer start value yhat(0), joint 1")
     yhat0_2: float = _p(0.0, "rad/s", "Observer start value yhat(0), joint 2")
@@ -122,16 +160,26 @@ class ControllerParams:
             if math.isfinite(value) and not value > 0.0:
                 raise ValueError(f"parameter {name} must be > 0 (got {value})")
         check_fields(self)
-        if self.velocity_source not in VELOCITY_SOURCES:
-            raise ValueError(
-                f"parameter velocity_source must be one of {', '.join(VELOCITY_SOURCES)}"
-                f" (got {self.velocity_source!r})"
-            )
+        try:
+            VELOCITY_SOURCE.item(self.velocity_source)
+        except ValueError as exc:
+            raise ValueError(f"parameter velocity_source {exc}") from None
         if self.observer_discretization not in OBSERVER_DISCRETIZATIONS:
             raise ValueError(
                 "parameter observer_discretization must be one of"
                 f" {', '.join(OBSERVER_DISCRETIZATIONS)} (got {self.observer_discretization!r})"
             )
+
+
+def _source_by_value(parameters: dict[str, Any]) -> dict[str, Any]:
+    """velocity_source given by item name (for callers of the plain model) as its value."""
+    source = parameters.get("velocity_source")
+    if not isinstance(source, str):
+        return parameters
+    try:
+        return {**parameters, "velocity_source": VELOCITY_SOURCE.value(source)}
+    except ValueError as exc:
+        raise ValueError(f"parameter velocity_source {exc}") from None
 
 
 # --- virtual trajectory (section 5) -------------------------------------------------------------
@@ -301,6 +349,8 @@ class ControllerModel(FmuModel):
     # The native flavour also offers Model Exchange: no continuous states, a time event at every
     # sample instant (native/controller/model.c, model_me_event_update).
     MODEL_EXCHANGE = ModelExchange(states=())
+    # Each output is computed at a sample from that sample's inputs and held until the next one.
+    OUTPUT_DEPENDENCIES = SAMPLED_INPUTS
 
     @classmethod
     def variables(cls) -> list[Variable]:
@@ -361,11 +411,13 @@ class ControllerModel(FmuModel):
             self.arm = Arm(build_params(ArmParams, parameters))  # the controller's own model
             self.traj = build_params(TrajectoryParams, parameters)
             self.traj.validate()
+            parameters = _source_by_value(parameters)
             self.ctrl = build_params(ControllerParams, parameters)
             self.ctrl.validate()
         except ValueError as exc:
             raise ModelError(str(exc)) from None
         c = self.ctrl
+        self.source = VELOCITY_SOURCE.item(c.velocity_source)
         self.K = (c.K1, c.K2, c.K3)
         self.G = (c.G1, c.G2, c.G3)
         self.B = (c.B1, c.B2, c.B3)
@@ -387,7 +439,7 @@ class ControllerModel(FmuModel):
     def _split(self, inputs: tuple) -> tuple[Vec3, Vec3, Vec3]:
         """Angles, wrist force and (when used) measured velocity; raise ModelError naming a
         non-finite input."""
-        measured = self.ctrl.velocity_source == "measured"
+        measured = self.source == "measured"
         check_finite_inputs(INPUTS if measured else INPUTS[:6], inputs)
         u = [float(v) for v in inputs]
         return (u[0], u[1], u[2]), (u[3], u[4], u[5]), (u[6], u[7], u[8])
@@ -414,7 +466,7 @@ class ControllerModel(FmuModel):
                 self.ctrl.observer_discretization,
             )  # fmt: skip
             qd_diff = ((q[0] - q_prev[0]) / ts, (q[1] - q_prev[1]) / ts, (q[2] - q_prev[2]) / ts)
-        source = self.ctrl.velocity_source
+        source = self.source
         qd_hat = yhat if source == "observer" else qd_diff if source == "difference" else qd_meas
         xv, xv_dot, xv_ddot = virtual_trajectory(self.traj, self.start_time + k * ts)
         tau, e, xd_hat = impedance_terms(
@@ -462,6 +514,27 @@ class ControllerModel(FmuModel):
         self.k_next = k
         self.held_input_samples += held
         self.t = t_end
+
+    def tune(self, parameters: dict[str, Any]) -> None:
+        """New gains (K, G, B), force setpoint (wall_depth) and trajectory, from the next sample
+        on (the observer and the held torque keep their state)."""
+        try:
+            parameters = _source_by_value(parameters)
+            traj = build_params(TrajectoryParams, parameters)
+            traj.validate()
+            ctrl = build_params(ControllerParams, parameters)
+            ctrl.validate()
+        except ValueError as exc:
+            raise ModelError(str(exc)) from None
+        for f in dataclasses.fields(ControllerParams):
+            if not f.metadata.get("tunable") and getattr(ctrl, f.name) != getattr(
+                self.ctrl, f.name
+            ):
+                raise ModelError(f"parameter {f.name} is fixed: it cannot change during a run")
+        self.traj, self.ctrl = traj, ctrl
+        self.K = (ctrl.K1, ctrl.K2, ctrl.K3)
+        self.G = (ctrl.G1, ctrl.G2, ctrl.G3)
+        self.B = (ctrl.B1, ctrl.B2, ctrl.B3)
 
     def outputs(self) -> tuple:
         return self.out

@@ -18,16 +18,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 from impedance_cosim import arm_terms as terms
 from impedance_cosim.linalg3 import Mat3, Vec3, matvec, solve
 
 
-def _p(default: float, unit: str, description: str, minimum: float | None = None) -> float:
-    """A parameter field with the metadata the FMU variable tables are generated from."""
+def _p(
+    default: Any,
+    unit: str,
+    description: str,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    **extra: Any,
+) -> Any:
+    """A parameter field with the metadata the FMU variable tables are generated from (extra:
+    tunable=True for a parameter that may change during a run, enumeration=<Enumeration>)."""
     return field(
         default=default,
-        metadata={"unit": unit, "description": description, "min": minimum},
+        metadata={
+            "unit": unit,
+            "description": description,
+            "min": minimum,
+            "max": maximum,
+            **extra,
+        },  # fmt: skip
     )
 
 
@@ -64,7 +79,8 @@ class ArmParams:
 
 
 def check_fields(obj: object) -> None:
-    """Raise ValueError if a float field of a parameter dataclass is non-finite or below its min."""
+    """Raise ValueError if a number field of a parameter dataclass is non-finite or outside its
+    min/max."""
     for f in fields(obj):  # type: ignore[arg-type]
         value = getattr(obj, f.name)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -74,6 +90,9 @@ def check_fields(obj: object) -> None:
         minimum = f.metadata.get("min")
         if minimum is not None and value < minimum:
             raise ValueError(f"parameter {f.name} must be >= {minimum} (got {value})")
+        maximum = f.metadata.get("max")
+        if maximum is not None and value > maximum:
+            raise ValueError(f"parameter {f.name} must be <= {maximum} (got {value})")
 
 
 class UnreachablePoseError(ValueError):

@@ -232,23 +232,33 @@ def _build_description(model_identifier: str, c_files: list[str]) -> bytes:
 
 
 def build_ssp(
-    out_dir: Path = DEFAULT_OUT, name: str = "PaperScenario", fmu_dir: Path | None = None
+    out_dir: Path = DEFAULT_OUT,
+    name: str = "PaperScenario",
+    fmu_dir: Path | None = None,
+    scenario: str | None = None,
 ) -> Path:
-    """Pack ssp/ (SystemStructure.ssd, the scenario .ssv files) with the FMUs in fmu_dir (default
-    out_dir) into out_dir/<name>.ssp, and validate it against the SSP 1.0 schemas."""
+    """Pack ssp/ with the FMUs in fmu_dir (default out_dir) into out_dir/<name>.ssp and validate
+    it against the SSP 1.0 schemas. Without scenario: every scenario, as SSP variants
+    (SystemStructure.ssd the default, <scenario>.ssd the others); with one: that scenario alone,
+    its SSD as SystemStructure.ssd (for engines that read only the default SSD)."""
     from fmpy.ssp.ssd import read_ssd
 
-    from impedance_cosim.system import COMPONENTS
+    from impedance_cosim.system import COMPONENTS, SCENARIOS, ssd_name, ssv_name
 
     out_dir = Path(out_dir)
     source = REPO / "ssp"
     target = out_dir / f"{name}.ssp"
     tmp_target = temp_path(target)
+    scenarios = list(SCENARIOS) if scenario is None else [scenario]
     with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
         # writestr with fixed dates and modes (z.write would take the files' mtimes)
-        z.writestr(_info("SystemStructure.ssd"), (source / "SystemStructure.ssd").read_bytes())
-        for ssv in sorted(source.glob("*.ssv")):
-            z.writestr(_info(f"resources/{ssv.name}"), ssv.read_bytes())
+        for s in scenarios:
+            ssd = (source / ssd_name(s)).read_bytes()
+            z.writestr(_info(ssd_name(s) if scenario is None else "SystemStructure.ssd"), ssd)
+        for s in scenarios:
+            for comp in COMPONENTS:
+                ssv = ssv_name(s, comp.name)
+                z.writestr(_info(f"resources/{ssv}"), (source / ssv).read_bytes())
         for comp in COMPONENTS:
             fmu = Path(fmu_dir or out_dir) / comp.fmu
             if not fmu.is_file():
@@ -256,11 +266,23 @@ def build_ssp(
             z.writestr(_info(comp.source), fmu.read_bytes())
     try:
         read_ssd(str(tmp_target), validate=True)
+        for s in scenarios:  # fmpy validates only SystemStructure.ssd (and the SSVs it binds)
+            if scenario is None and ssd_name(s) != "SystemStructure.ssd":
+                _validate_variant(tmp_target, ssd_name(s))
     except Exception as exc:
         tmp_target.unlink()
         raise ValueError(f"{target.name} does not validate: {exc}") from None
     tmp_target.replace(target)
     return target
+
+
+def _validate_variant(archive: Path, ssd: str) -> None:
+    """Schema-validate a variant SSD of an archive (raises on the first problem)."""
+    from fmpy.ssp.ssd import validate_tree
+    from lxml import etree
+
+    with zipfile.ZipFile(archive) as z:
+        validate_tree(etree.fromstring(z.read(ssd)), "SystemStructureDescription.xsd")
 
 
 def _model_description(
@@ -294,7 +316,13 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
         native = []
     built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in native]
     if not only:
-        built.append(build_ssp(out_dir))
+        from impedance_cosim.system import SCENARIOS
+
+        flavours = [("PaperScenario", None)]
         if native:
-            built.append(build_ssp(out_dir, "PaperScenario-native", Path(out_dir) / "native"))
+            flavours.append(("PaperScenario-native", Path(out_dir) / "native"))
+        for name, fmu_dir in flavours:
+            built.append(build_ssp(out_dir, name, fmu_dir))
+            for s in SCENARIOS:  # one archive per scenario, for engines without SSP variants
+                built.append(build_ssp(out_dir, f"{name}-{s}", fmu_dir, scenario=s))
     return built

@@ -48,7 +48,11 @@ def expected_members() -> list[str]:
     names = [f"{FMUS[k].model_name}.fmu" for k in FMUS]
     native = [k for k in FMUS if (NATIVE / k / "model.c").is_file()]
     names += [f"native/{FMUS[k].model_name}.fmu" for k in native]
-    return names + ["PaperScenario.ssp", "PaperScenario-native.ssp"]
+    from impedance_cosim.system import SCENARIOS
+
+    systems = [f"{base}{s}.ssp" for base in ("PaperScenario", "PaperScenario-native")
+               for s in ("", *(f"-{name}" for name in SCENARIOS))]  # fmt: skip
+    return names + systems
 
 
 def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
@@ -123,8 +127,10 @@ lists every variable with unit, range, default and meaning, the equations and th
 FMUs (fmus/: the Python flavour, which needs a Python host such as fmpy; fmus/native/: the
 same models in C99, for any FMI host):
 {fmus}
-Systems (SSP 1.0: the two FMUs wired, one parameter set per scenario: observer, difference,
-measured):
+Systems (SSP 1.0: the two FMUs wired; each scenario (observer, difference, measured) is a system
+description binding its own parameter set: in PaperScenario*.ssp as SSP variants
+(SystemStructure.ssd = observer, difference.ssd, measured.ssd), and alone in
+PaperScenario*-<scenario>.ssp for engines that read only SystemStructure.ssd):
 {ssps}
 Reference results (CSV; each FMU's default experiment, and the paper's 20 s closed loop):
 {refs}
@@ -133,9 +139,10 @@ Run one FMU with fmpy (pip install fmpy):
   fmpy simulate fmus/native/PumaPlant.fmu --output-interval 0.0025
   fmpy simulate fmus/ImpedanceController.fmu --output-interval 0.0025
 
-Run the system with the impedance-cosim package (its master applies the parameter sets):
+Run the system with the impedance-cosim package, or with libcosim, ecospy or fmpy (see the
+project's README, "Running our FMUs and systems elsewhere"):
 
-  impedance-cosim run --ssp fmus/PaperScenario-native.ssp
+  impedance-cosim run --ssp fmus/PaperScenario-native.ssp --scenario difference
 
 SHA256SUMS lists the checksum of every file (sha256sum -c SHA256SUMS).
 Licence: BSD-2-Clause, see LICENSE (also inside every FMU, documentation/licenses/).

@@ -8,11 +8,12 @@ fmus/PaperScenario.ssp, read from libcosim's sources and checked on runs here:
   extracts it into a temporary folder and removes it again. Each component's instance name is its
   SSD name ("controller", "plant"); slave indices follow no documented order (here controller 0,
   plant 1), so look them up by name.
-- Parameters: libcosim applies only ParameterBindings inside a Component; the system-level bindings
-  of our SSD are silently ignored (no warning), and the C API cannot name a parameter set. Our
-  scenario sets the FMUs' start values, so nothing would show for "observer", but "difference"
-  would run as "observer". This function therefore reads the chosen set with our own
-  `read_ssp` and gives each value to libcosim as an initial value (set before initialization).
+- Parameters: libcosim applies only ParameterBindings inside a Component (system-level ones are
+  silently ignored) and reads only SystemStructure.ssd, and its C API cannot name a parameter set.
+  Our SSDs bind each scenario's set on the components, one scenario per SSD, so a scenario's own
+  archive (PaperScenario-<scenario>.ssp) runs as it is (parameter_set=None). Given a set name,
+  this function also reads that set with our own `read_ssp` (from any variant SSD) and gives
+  each value to libcosim as an initial value (set before initialization).
 - Time: integer nanoseconds. The step size must be a whole number of ns (0.0025 s = 2,500,000 ns);
   FMUs get t_i = (i * h_ns) / 1e9 and a step length t_{i+1} - t_i, both computed from the
   integers, so both can differ by an ulp from our master's t_0 + i * h and h.
@@ -47,6 +48,7 @@ one-step torque delay (up to 4 N of contact force, 1 N m of torque).
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -92,13 +94,16 @@ def _samples(observer: Any, slave: int, ref: int, steps: int) -> np.ndarray:
 
 def run_in_libcosim(
     ssp_path: str | Path,
-    parameter_set: str = "observer",
+    parameter_set: str | None = "observer",
     stop_time: float = 20.0,
     step_size: float = 0.0025,
     log_level: str = "warning",
 ) -> dict[str, np.ndarray]:
     """Run an SSP archive in libcosim's fixed-step (Jacobi) algorithm for stop_time seconds from
-    the SSD's start time (0 in ours), with one parameter set; conventions above.
+    the SSD's start time (0 in ours); conventions above. parameter_set None: only what libcosim
+    applies itself (the component-level bindings of SystemStructure.ssd: a scenario's own
+    archive); a name: that set of the archive (read by our reader, from any variant SSD) is
+    given to libcosim as initial values on top.
 
     Returns "time" (t_i = (start_ns + i * h_ns) / 1e9 s, the start time being the SSD's) and
     every Real output as "component.variable", each an array of stop_time / step_size + 1
@@ -121,10 +126,14 @@ def run_in_libcosim(
 
     from impedance_cosim.ssp import read_ssp
 
-    with tempfile.TemporaryDirectory(prefix="impcosim_libcosim_") as tmp:
-        sets = read_ssp(ssp_path, extract_to=Path(tmp)).parameter_sets
-    if parameter_set not in sets:
-        raise ValueError(f"no parameter set {parameter_set!r} in {ssp_path} (have {list(sets)})")
+    sets: dict[str, list] = {}
+    if parameter_set is not None:
+        with tempfile.TemporaryDirectory(prefix="impcosim_libcosim_") as tmp:
+            sets = read_ssp(ssp_path, extract_to=Path(tmp)).parameter_sets
+        if parameter_set not in sets:
+            raise ValueError(
+                f"no parameter set {parameter_set!r} in {ssp_path} (have {list(sets)})"
+            )
 
     log_output_level(CosimLogLevel[log_level.upper()])
     try:
@@ -143,7 +152,7 @@ def run_in_libcosim(
         CosimVariableType.BOOLEAN.value: execution.boolean_initial_value,
         CosimVariableType.STRING.value: execution.string_initial_value,
     }
-    for p in sets[parameter_set]:
+    for p in sets.get(parameter_set, []) if parameter_set is not None else []:
         component, name = p.name.split(".", 1)
         v = variables.get(component, {}).get(name)
         if v is None:
@@ -173,3 +182,81 @@ def run_in_libcosim(
     for key, index, ref in outputs:
         result[key] = _samples(observer, index, ref, steps)
     return result
+
+
+# --- other engines' time grids and start values, for Master(step_times=..., zero_start_inputs=)
+
+
+class AccumulatedTimes:
+    """Step times t_i+1 = t_i + h accumulated in floating point, as fmpy's simulate_ssp and ecospy
+    step (a callable for Master(step_times=...): step i -> (t_i, h))."""
+
+    def __init__(self, start: float, step: float) -> None:
+        self.step = step
+        self.times = [start]
+
+    def __call__(self, i: int) -> tuple[float, float]:
+        while len(self.times) <= i:
+            self.times.append(self.times[-1] + self.step)
+        return self.times[i], self.step
+
+
+def nanosecond_times(start: float, step: float) -> Callable[[int], tuple[float, float]]:
+    """libcosim's grid: t_i = (start_ns + i h_ns) / 1e9 and length t_i+1 - t_i (see above)."""
+    start_ns, h_ns = round(start * NS_PER_S), _whole_ns(step, "step")
+
+    def times(i: int) -> tuple[float, float]:
+        t = (start_ns + i * h_ns) / NS_PER_S
+        return t, (start_ns + (i + 1) * h_ns) / NS_PER_S - t
+
+    return times
+
+
+# --- fmpy's simulate_ssp and ecospy: each run with the engine's own API only ---------------------
+
+
+def run_in_fmpy(ssp_path: str | Path, stop_time: float, step_size: float) -> dict[str, np.ndarray]:
+    """fmpy's simulate_ssp on an archive's SystemStructure.ssd. It applies no ParameterBinding
+    itself, so the bindings (read with fmpy's own read_ssd) are passed as its parameter_set.
+    Returns every connector as "component.connector": row i holds the values after step i (fmpy
+    stamps it with the step's start time, which is left out), stop_time / step_size rows."""
+    from fmpy.ssp.simulation import simulate_ssp
+    from fmpy.ssp.ssd import ParameterSet, read_ssd
+
+    bound = ParameterSet(name="bound")
+    for c in read_ssd(str(ssp_path)).system.elements:
+        for p in (p for b in c.parameterBindings for s in b.parameterValues for p in s.parameters):
+            p.name = f"{c.name}.{p.name}"  # component-relative names, as fmpy wants them whole
+            bound.parameters.append(p)
+    rows = simulate_ssp(
+        str(ssp_path), stop_time=stop_time, step_size=step_size, parameter_set=bound
+    )
+    n = round(stop_time / step_size)  # fmpy's accumulated time may add one more step
+    return {name: rows[name][:n] for name in rows.dtype.names if name != "time"}
+
+
+def run_in_ecospy(
+    ssp_path: str | Path, parameter_set: str | None, stop_time: float, step_size: float,
+    names: list[str],
+) -> dict[str, np.ndarray]:  # fmt: skip
+    """ecospy on an archive's SystemStructure.ssd, applying the named parameter set (ecospy
+    applies bindings only when their set is named). Returns the Real variables `names`
+    ("component.variable") after initialization and after each step (stop_time / step_size + 1
+    rows). ImportError/OSError when ecospy (or Debian's libtbb12) is missing."""
+    import ecospy
+
+    sim = ecospy.EcosSimulation(step_size=step_size, ssp_path=str(ssp_path))
+    try:
+        if not sim.init(parameter_set=parameter_set):
+            raise EngineError(f"ecospy could not initialize {ssp_path}")
+        n = round(stop_time / step_size)
+        rows = []
+        for i in range(n + 1):
+            rows.append([sim.get_real(name.replace(".", "::")) for name in names])
+            if i < n:
+                sim.step()
+        sim.terminate()
+    finally:
+        sim.free()
+    values = np.array(rows)
+    return {name: values[:, k] for k, name in enumerate(names)}

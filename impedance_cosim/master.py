@@ -33,7 +33,7 @@ import gc
 import math
 import sys
 import time as wallclock
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -41,6 +41,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from impedance_cosim import fastloop
+from impedance_cosim.fmi.variables import ENUMERATIONS
 from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, check_fmu, fmi_value
 from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
 from impedance_cosim.results import Feed, Sink, size_problem
@@ -144,8 +145,16 @@ class Master:
         fmu_files: Mapping[str, Path] | None = None,
         loop: str = "auto",
         realtime: bool = False,
+        step_times: Callable[[int], tuple[float, float]] | None = None,
+        zero_start_inputs: bool = False,
     ) -> None:
         self.system = system
+        # Another engine's conventions, to compare with it (Python loop only; engines.py has
+        # them): step_times(i) gives step i's start time and length (default t_0 + i h, h);
+        # zero_start_inputs: the first step's connected inputs are 0.0, not the initialized
+        # outputs (with Jacobi).
+        self.step_times = step_times
+        self.zero_start_inputs = zero_start_inputs
         self.algorithm = algorithm or system.algorithm or "gauss-seidel"
         if self.algorithm not in ALGORITHMS:
             raise MasterError(f"algorithm must be one of {ALGORITHMS} (got {self.algorithm!r})")
@@ -168,6 +177,11 @@ class Master:
         self.divergence_limit = divergence_limit
         if loop not in ("auto", "c", "python"):
             raise MasterError(f"loop must be auto, c or python (got {loop!r})")
+        if (step_times or zero_start_inputs) and (loop == "c" or realtime):
+            raise MasterError("step_times and zero_start_inputs need the Python loop")
+        if zero_start_inputs and self.algorithm != "jacobi":
+            raise MasterError("zero_start_inputs needs the Jacobi algorithm")
+        loop = "python" if step_times or zero_start_inputs else loop
         self.loop = loop
         self.realtime = realtime
         sets = system.parameter_sets
@@ -248,7 +262,13 @@ class Master:
 
     @staticmethod
     def _value(v, value: Any, name: str) -> Any:
+        enum = ENUMERATIONS.get(getattr(v.declaredType, "name", ""))
         try:
+            if enum and isinstance(value, str) and not value.strip().lstrip("+-").isdigit():
+                try:  # an item name of our enumerations ("difference" for velocity_source)
+                    value = enum.value(value.strip())
+                except ValueError as exc:
+                    raise ValueError(f"variable {name}: {exc}") from None
             return fmi_value(v.type, value, name)
         except ValueError as exc:
             raise MasterError(str(exc)) from None
@@ -399,19 +419,20 @@ class Master:
         h, t0 = self.step_size, self.start_time
         jacobi = self.algorithm == "jacobi"
         for i in range(first, first + count):
-            t = t0 + i * h
+            t, h_i = self.step_times(i) if self.step_times else (t0 + i * h, h)
             try:
                 if jacobi:
+                    zero = self.zero_start_inputs and i == 0
                     for s in ordered:
-                        s.write([ordered[j].values[k] for j, k in s.sources])
+                        s.write([0.0 if zero else ordered[j].values[k] for j, k in s.sources])
                     for s in ordered:
-                        s.fmu.step(t, h)
+                        s.fmu.step(t, h_i)
                     for s in ordered:
                         s.values = s.read()
                 else:
                     for s in ordered:
                         s.write([ordered[j].values[k] for j, k in s.sources])
-                        s.fmu.step(t, h)
+                        s.fmu.step(t, h_i)
                         s.values = s.read()
             except FmuError as exc:
                 return i - first, str(exc)

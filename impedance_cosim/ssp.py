@@ -2,7 +2,9 @@
 
 Supports what the system needs: one system of FMU components, connectors with types and units,
 connections, parameter bindings with .ssv parameter sets (on the system or on components), the
-default experiment, and this project's master annotation (step size, algorithm, order).
+default experiment, and this project's master annotation (step size, algorithm, order); and SSP
+variants: further .ssd files at the archive's root, each read as the same system with the
+parameter set(s) it binds (the scenarios).
 The archive is treated as hostile: see ssp_archive (member checks, caps, safe `source` URIs).
 Every problem found is an SspError naming the file and element; nothing else escapes.
 """
@@ -77,6 +79,7 @@ class SystemDescription:
     step_size: float | None = None
     algorithm: str | None = None
     order: list[str] = field(default_factory=list)
+    variants: dict[str, str] = field(default_factory=dict)  # parameter set -> the SSD binding it
     folder: Path | None = None  # where the archive was extracted
     _extracted: Any = field(default=None, repr=False)  # finaliser removing an owned folder
 
@@ -99,10 +102,16 @@ class SystemDescription:
 
 
 def read_ssp(
-    path: str | Path, extract_to: Path | None = None, limits: Limits = DEFAULT_LIMITS
+    path: str | Path,
+    extract_to: Path | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+    ssd: str | None = None,
 ) -> SystemDescription:
     """Check, extract (to a new temporary folder, or the empty folder `extract_to`) and read an
-    .ssp archive. Close the result (or use it as a context manager) to remove the folder."""
+    .ssp archive. Close the result (or use it as a context manager) to remove the folder.
+
+    Its parameter sets are those of SystemStructure.ssd and of every variant SSD beside it (each
+    variant must describe the same system); with `ssd` ("difference.ssd"), of that SSD only."""
     path = Path(path)
     if not path.exists():
         raise SspError(f"{path} does not exist (run `impedance-cosim build`)")
@@ -119,7 +128,7 @@ def read_ssp(
     except OSError as exc:
         raise SspError(f"cannot make a folder to extract {path.name} into: {exc}") from None
     try:
-        desc = _read(path, folder, limits)
+        desc = _read(path, folder, limits, ssd)
     except BaseException:
         if extract_to is None:
             shutil.rmtree(folder, ignore_errors=True)
@@ -129,56 +138,94 @@ def read_ssp(
     return desc
 
 
-def _read(path: Path, folder: Path, limits: Limits) -> SystemDescription:
+def _read(path: Path, folder: Path, limits: Limits, ssd: str | None) -> SystemDescription:
     where = path.name
     with open_zip(path, where, limits) as archive:
         files = check_members(archive, where, limits)
         names = {f.filename for f in files}
         if SSD not in names:
             raise SspError(f"{where} has no {SSD}")
+        if ssd is not None and ssd not in names:
+            variants = sorted(n for n in names if _is_variant(n))
+            raise SspError(f"{where} has no system description {ssd!r} (have {[SSD, *variants]})")
         infos = {f.filename: f for f in files}
-        root = _xml(archive, infos[SSD], where, "SystemStructureDescription.xsd", limits)
         extract(archive, files, folder, where, limits)
-        system = root.find("ssd:System", NS)
-        if system is None:
-            raise SspError(f"malformed SSD in {where}: {SSD} has no System element")
-        sysname = system.get("name") or ""
-        for tag in ("System", "SignalDictionaryReference"):
-            if system.find(f"ssd:Elements/ssd:{tag}", NS) is not None:
-                raise SspError(f"{where}: system {sysname!r}: {tag} elements are not supported")
-        ctx = f"{where}: system {sysname!r}"
         src = _Source(archive, infos, where, limits, xml_left=4 * limits.xml_bytes)
-        sets = _bindings(system, "", ctx, src)
-        components: list[Component] = []
-        seen: set[str] = set()
-        for i, c in enumerate(system.findall("ssd:Elements/ssd:Component", NS), 1):
-            name = _required(c, "name", f"{where}: component #{i}")
-            what = f"{where}: component {name!r}"
-            if name in seen:
-                raise SspError(f"{what} is declared twice")
-            if c.get("type", FMU_TYPE) != FMU_TYPE:
-                raise SspError(f"{what}: type {c.get('type')} is not an FMU")
-            source = resolve_source(c.get("source"), names, what)
-            _check_fmu(folder / source, f"{where}: {source}", limits)
-            comp = Component(name, source, _connectors(c, what), fmu=folder / source)
-            components.append(comp)
-            seen.add(name)
-            sets += _bindings(c, name + ".", what, src)
+        names_read = (
+            [ssd] if ssd is not None else [SSD, *sorted(n for n in names if _is_variant(n))]
+        )
+        desc = _system(src, names_read[0], folder)
+        for variant in names_read[1:]:  # SSP variants: the same system, other parameters
+            other = _system(src, variant, folder)
+            if (other.components, other.connections, other.units) != (
+                desc.components,
+                desc.connections,
+                desc.units,
+            ):
+                raise SspError(f"{where}: variant {variant} describes another system than {SSD}"
+                               " (components, connections or units differ); this reader takes"
+                               " variants that differ only in their parameters")  # fmt: skip
+            for key, params in other.parameter_sets.items():
+                if key in desc.parameter_sets:
+                    raise SspError(f"{where}: {variant}: parameter set name {key!r} is also used"
+                                   f" in {desc.variants[key]}")  # fmt: skip
+                desc.parameter_sets[key] = params
+                desc.variants[key] = variant
+    return desc
+
+
+def _is_variant(name: str) -> bool:
+    """A further system description at the archive's root (SSP 1.0: a variant of the system)."""
+    return "/" not in name and name.endswith(".ssd") and name != SSD
+
+
+def _system(src: _Source, ssd: str, folder: Path) -> SystemDescription:
+    """One system description of the archive: its system, bindings and experiment."""
+    where, limits = src.where, src.limits
+    root = _xml(src.archive, src.infos[ssd], where, "SystemStructureDescription.xsd", limits)
+    where_ssd = where if ssd == SSD else f"{where}: {ssd}"
+    system = root.find("ssd:System", NS)
+    if system is None:
+        raise SspError(f"malformed SSD in {where}: {ssd} has no System element")
+    sysname = system.get("name") or ""
+    for tag in ("System", "SignalDictionaryReference"):
+        if system.find(f"ssd:Elements/ssd:{tag}", NS) is not None:
+            raise SspError(f"{where_ssd}: system {sysname!r}: {tag} elements are not supported")
+    ctx = f"{where_ssd}: system {sysname!r}"
+    sets = _bindings(system, "", ctx, src)
+    components: list[Component] = []
+    seen: set[str] = set()
+    names = set(src.infos)
+    for i, c in enumerate(system.findall("ssd:Elements/ssd:Component", NS), 1):
+        name = _required(c, "name", f"{where_ssd}: component #{i}")
+        what = f"{where_ssd}: component {name!r}"
+        if name in seen:
+            raise SspError(f"{what} is declared twice")
+        if c.get("type", FMU_TYPE) != FMU_TYPE:
+            raise SspError(f"{what}: type {c.get('type')} is not an FMU")
+        source = resolve_source(c.get("source"), names, what)
+        _check_fmu(folder / source, f"{where}: {source}", limits)
+        comp = Component(name, source, _connectors(c, what), fmu=folder / source)
+        components.append(comp)
+        seen.add(name)
+        sets += _bindings(c, name + ".", what, src)
     desc = SystemDescription(
         name=sysname,
         components=components,
         connections=_connections(system, ctx),
         parameter_sets={},
-        units=_units(root, where),
+        units=_units(root, where_ssd),
         folder=folder,
     )
-    for i, (name, params, what) in enumerate(sets):
+    # All bindings of a system apply (SSP 1.0), in order; bindings whose sets share a name (one
+    # scenario bound on each component) form one parameter set. Sets of different names are
+    # offered as alternatives (this project's earlier archives: one system, one set per scenario).
+    for i, (name, params, _) in enumerate(sets):
         key = name or f"set{i + 1}"
-        if key in desc.parameter_sets:
-            raise SspError(f"{what}: parameter set name {key!r} is used twice")
-        desc.parameter_sets[key] = params
-    _experiment(root, desc, where)
-    _check_connections(desc, where)
+        desc.parameter_sets.setdefault(key, []).extend(params)
+        desc.variants.setdefault(key, ssd)
+    _experiment(root, desc, where_ssd)
+    _check_connections(desc, where_ssd)
     return desc
 
 

@@ -1,8 +1,11 @@
 """The paper's system, defined once: components, connections, scenarios (parameter sets).
 
-From this definition come the SSP 1.0 files in ssp/ (SystemStructure.ssd and one .ssv per
-scenario, committed and checked to be up to date by the tests), the .ssp archives the build packs,
-and the plain-model loop's wiring.
+From this definition come the SSP 1.0 files in ssp/ (committed and checked to be up to date by the
+tests), the .ssp archives the build packs, and the plain-model loop's wiring. Each scenario is a
+system description of its own that binds exactly one parameter set, on each component (the
+bindings of one system all apply, later ones overriding earlier ones, so alternatives cannot share
+an SSD): SystemStructure.ssd is the default variant (observer), difference.ssd and measured.ssd
+the others, each binding resources/<scenario>_<component>.ssv.
 """
 
 from __future__ import annotations
@@ -89,6 +92,12 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "difference": {**PAPER_PARAMETERS, "controller.velocity_source": "difference"},
     "measured": {**PAPER_PARAMETERS, "controller.velocity_source": "measured"},
 }
+DEFAULT_SCENARIO = "observer"  # the scenario of SystemStructure.ssd (SSP's default variant)
+# The scenario switch controller.velocity_source (an enumeration of the variable table). True:
+# the SSD and SSV files type it as an SSP Enumeration (value = item name); False: as an Integer
+# (the item's value), as the FMUs declare it (see FMI_ENUMERATIONS in fmi/variables.py: libcosim
+# aborts on SSP Enumeration types).
+SSV_ENUMERATIONS = False
 SCENARIO_DESCRIPTIONS = {
     "observer": "The paper's run: joint velocity from the reduced-order observer, eq. (9)",
     "difference": "Fig. 4 baseline: backward difference of the measured joint angles",
@@ -104,7 +113,18 @@ def _type_element(parent: ET.Element, prefix: str, v: Variable, value: Any = Non
     attrs = {} if value is None else {"value": _literal(value)}
     if v.type == "Real" and v.unit:
         attrs["unit"] = v.unit
-    ET.SubElement(parent, _q(prefix, v.type), attrs)
+    if v.enumeration and SSV_ENUMERATIONS:
+        attrs["name"] = v.enumeration.name
+        if value is not None and prefix == "ssv":
+            del attrs["name"]
+            attrs["value"] = value if isinstance(value, str) else v.enumeration.item(value)
+    elif v.enumeration and value is not None:
+        attrs["value"] = str(v.enumeration.value(value) if isinstance(value, str) else value)
+    ET.SubElement(parent, _q(prefix, _ssp_type(v)), attrs)
+
+
+def _ssp_type(v: Variable) -> str:
+    return "Enumeration" if v.enumeration and SSV_ENUMERATIONS else v.type
 
 
 def _literal(value: Any) -> str:
@@ -122,22 +142,33 @@ def parameter_variable(name: str) -> Variable:
     raise KeyError(name)
 
 
-def ssd_xml() -> bytes:
-    """SystemStructure.ssd of the paper's system."""
+def ssd_name(scenario: str) -> str:
+    """The file name of a scenario's system description in the archive (SSP 1.0: the default
+    variant is SystemStructure.ssd, the other variants are further .ssd files beside it)."""
+    return "SystemStructure.ssd" if scenario == DEFAULT_SCENARIO else f"{scenario}.ssd"
+
+
+def ssv_name(scenario: str, component: str) -> str:
+    """The parameter set file of one component in one scenario (under resources/)."""
+    return f"{scenario}_{component}.ssv"
+
+
+def ssd_xml(scenario: str = "observer") -> bytes:
+    """The system description of one scenario: the paper's system with that scenario's parameter
+    set bound to each component (SSP 1.0 applies every binding of a system: one set per SSD)."""
     root = ET.Element(
         _q("ssd", "SystemStructureDescription"),
-        {"version": "1.0", "name": "ImpedanceControlWithoutVelocityMeasurements", **META},
-    )
+        {"version": "1.0", "name": scenario, "description": SCENARIO_DESCRIPTIONS[scenario],
+         **META},
+    )  # fmt: skip
     system = ET.SubElement(
         root,
         _q("ssd", "System"),
         {"name": SYSTEM_NAME, "description": "PUMA-subset plant + observer/impedance controller"},
     )
-    bindings = ET.SubElement(system, _q("ssd", "ParameterBindings"))
-    for name in SCENARIOS:
-        ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {"source": f"resources/{name}.ssv"})
     elements = ET.SubElement(system, _q("ssd", "Elements"))
     used_units: set[str] = set()
+    enumerations = {}
     for comp in COMPONENTS:
         el = ET.SubElement(
             elements,
@@ -163,6 +194,14 @@ def ssd_xml() -> bytes:
             _type_element(c, "ssc", v)
             if v.unit and v.type == "Real":
                 used_units.add(v.unit)
+            if v.enumeration:
+                enumerations[v.enumeration.name] = v.enumeration
+        bindings = ET.SubElement(el, _q("ssd", "ParameterBindings"))
+        ET.SubElement(
+            bindings,
+            _q("ssd", "ParameterBinding"),
+            {"source": f"resources/{ssv_name(scenario, comp.name)}"},
+        )
     connections = ET.SubElement(system, _q("ssd", "Connections"))
     for se, sc, ee, ec in CONNECTIONS:
         ET.SubElement(
@@ -170,10 +209,9 @@ def ssd_xml() -> bytes:
             _q("ssd", "Connection"),
             {"startElement": se, "startConnector": sc, "endElement": ee, "endConnector": ec},
         )
-    units = ET.SubElement(root, _q("ssd", "Units"))
-    for u in sorted(used_units):
-        unit = ET.SubElement(units, _q("ssc", "Unit"), {"name": u})
-        ET.SubElement(unit, _q("ssc", "BaseUnit"), {k: str(e) for k, e in UNITS[u].items()})
+    if SSV_ENUMERATIONS:
+        _enumerations(root, "ssd", enumerations.values())
+    _units(root, "ssd", used_units)
     exp = ET.SubElement(
         root, _q("ssd", "DefaultExperiment"), {"startTime": "0.0", "stopTime": repr(STOP)}
     )
@@ -195,32 +233,69 @@ def ssd_xml() -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
-def ssv_xml(name: str) -> bytes:
-    """The parameter set of a scenario."""
+def _enumerations(root: ET.Element, prefix: str, enums: Any) -> None:
+    enums = list(enums)
+    if not enums:
+        return
+    parent = ET.SubElement(root, _q(prefix, "Enumerations"))
+    for e in enums:
+        el = ET.SubElement(parent, _q("ssc", "Enumeration"),
+                           {"name": e.name, "description": e.description})  # fmt: skip
+        for k, (name, _) in enumerate(e.items, 1):
+            ET.SubElement(el, _q("ssc", "Item"), {"name": name, "value": str(k)})
+
+
+def _units(root: ET.Element, prefix: str, used: set[str]) -> None:
+    units = ET.SubElement(root, _q(prefix, "Units"))
+    for u in sorted(used):
+        unit = ET.SubElement(units, _q("ssc", "Unit"), {"name": u})
+        ET.SubElement(unit, _q("ssc", "BaseUnit"), {k: str(e) for k, e in UNITS[u].items()})
+
+
+def ssv_xml(scenario: str, component: str) -> bytes:
+    """One component's values in a scenario's parameter set (names relative to the component)."""
     root = ET.Element(
         _q("ssv", "ParameterSet"),
-        {"version": "1.0", "name": name, "description": SCENARIO_DESCRIPTIONS[name], **META},
-    )
+        {"version": "1.0", "name": scenario, "description": SCENARIO_DESCRIPTIONS[scenario],
+         **META},
+    )  # fmt: skip
     params = ET.SubElement(root, _q("ssv", "Parameters"))
     used_units: set[str] = set()
-    for pname, value in SCENARIOS[name].items():
+    enumerations = {}
+    for pname, value in SCENARIOS[scenario].items():
+        if not pname.startswith(component + "."):
+            continue
         v = parameter_variable(pname)
-        p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": pname})
+        p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": pname.split(".", 1)[1]})
         _type_element(p, "ssv", v, value)
         if v.type == "Real" and v.unit:
             used_units.add(v.unit)
-    units = ET.SubElement(root, _q("ssv", "Units"))
-    for u in sorted(used_units):
-        unit = ET.SubElement(units, _q("ssc", "Unit"), {"name": u})
-        ET.SubElement(unit, _q("ssc", "BaseUnit"), {k: str(e) for k, e in UNITS[u].items()})
+        if v.enumeration:
+            enumerations[v.enumeration.name] = v.enumeration
+    if SSV_ENUMERATIONS:
+        _enumerations(root, "ssv", enumerations.values())
+    _units(root, "ssv", used_units)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
+def scenario_files(scenario: str) -> dict[str, bytes]:
+    """The SSD and SSV files of one scenario (archive path -> content), its SSD as given by
+    ssd_name: packed with the others into the multi-variant archive, or alone (its SSD then
+    named SystemStructure.ssd) into that scenario's own archive."""
+    files = {ssd_name(scenario): ssd_xml(scenario)}
+    for comp in COMPONENTS:
+        name = ssv_name(scenario, comp.name)
+        files[f"resources/{name}"] = ssv_xml(scenario, comp.name)
+    return files
+
+
 def source_files() -> dict[str, bytes]:
     """The files of ssp/ (name -> content) as generated from this module."""
-    files = {"SystemStructure.ssd": ssd_xml()}
-    files.update({f"{name}.ssv": ssv_xml(name) for name in SCENARIOS})
+    files = {}
+    for scenario in SCENARIOS:
+        for path, content in scenario_files(scenario).items():
+            files[path.removeprefix("resources/")] = content
     return files
 
 

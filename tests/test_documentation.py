@@ -209,7 +209,7 @@ def test_system_archives_carry_the_licence_metadata(fmu_dir: Path, native_dir: P
     for ssp in (fmu_dir / "PaperScenario.ssp", fmu_dir / "PaperScenario-native.ssp"):
         with zipfile.ZipFile(ssp) as z:
             files = [n for n in z.namelist() if n.endswith((".ssd", ".ssv"))]
-            assert len(files) == 4, files
+            assert len(files) == 9, files  # 3 SSDs (scenario variants), 6 SSVs
             for name in files:
                 root = ET.fromstring(z.read(name))
                 assert root.get("author") == "The impedance-cosim authors", name

@@ -90,14 +90,14 @@ def test_parameter_sets_are_applied(ssp_path):
 
 
 def test_parameter_bindings_change_the_run(ssp_path, tmp_path):
-    """Edit the observer gain in the archive's observer.ssv: the observer output changes."""
+    """Edit the observer gain in the archive's observer set: the observer output changes."""
 
     def lower_gain(data: bytes) -> bytes:
         text = data.decode()
-        start = text.index('name="controller.K1"')
+        start = text.index('name="K1"')
         return (text[:start] + text[start:].replace('value="50.0"', 'value="5.0"', 1)).encode()
 
-    edited = modified(ssp_path, tmp_path, {"resources/observer.ssv": lower_gain})
+    edited = modified(ssp_path, tmp_path, {"resources/observer_controller.ssv": lower_gain})
     base = Master(read_ssp(ssp_path), stop_time=0.5).run()
     changed = Master(read_ssp(edited), stop_time=0.5).run()
     assert np.abs(changed["controller.qd_obs1"] - base["controller.qd_obs1"]).max() > 1e-4
@@ -150,7 +150,10 @@ def test_connector_missing_in_the_fmu_is_refused(ssp_path, tmp_path):
             b'endConnector="q1"', b'endConnector="q_one"'
         )
 
-    system = read_ssp(modified(ssp_path, tmp_path, {"SystemStructure.ssd": rename}))
+    edited = modified(ssp_path, tmp_path, {"SystemStructure.ssd": rename})
+    with pytest.raises(SspError, match="variant difference.ssd describes another system"):
+        read_ssp(edited)
+    system = read_ssp(edited, ssd="SystemStructure.ssd")  # that SSD alone
     with pytest.raises(MasterError, match="controller.q_one: no such variable"):
         Master(system)
 

@@ -210,7 +210,7 @@ def test_bad_values_are_refused_when_set(native_dir, values, message):
         (PLANT, {"x0": 1.5}, "unreachable"),
         (PLANT, {"a1": 0.0}, "link lengths a1, a2 must be > 0"),
         (CONTROLLER, {"K2": 0.0}, "parameter K2 must be > 0"),
-        (CONTROLLER, {"velocity_source": "guess"}, "velocity_source must be one of"),
+        (CONTROLLER, {"velocity_source": 7}, "velocity_source must be one of"),
         (CONTROLLER, {"q2": 0.0}, "singular"),
     ],
 )

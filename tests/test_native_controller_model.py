@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller_model.model import INPUT_START, ControllerModel
+from controller_model.model import INPUT_START, VELOCITY_SOURCE, ControllerModel
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.loop import run_models
 
@@ -170,7 +170,9 @@ class Native:
         self.r = np.ctypeslib.as_array(lib.data_r(self.buf), shape=(n,))
         self.i = np.ctypeslib.as_array(lib.data_i(self.buf), shape=(n,))
         for name, value in parameters.items():
-            if isinstance(value, str):
+            if name == "velocity_source" and isinstance(value, str):  # as the Python model
+                self.i[VR[name]] = VELOCITY_SOURCE.value(value)
+            elif isinstance(value, str):
                 lib.data_set_string(self.buf, VR[name], value.encode())
             elif isinstance(value, (bool, int)):  # Boolean and Integer parameters
                 self.i[VR[name]] = int(value)
@@ -368,14 +370,13 @@ def model_error(make) -> str:
         {"tau_max1": 0.0},
         {"a1": 0.0},
         {"a2": 0.0, "K1": 0.0},
-        {"velocity_source": "guess"},
-        {"velocity_source": ""},
-        {"velocity_source": "it's"},
-        {"velocity_source": "a\"b'c\\\t\n"},
-        {"velocity_source": "Observer"},
+        {"velocity_source": 0},
+        {"velocity_source": 4},
+        {"velocity_source": -1},
+        {"velocity_source": 2**31 - 1},
         {"observer_discretization": "rk4"},
         {"observer_discretization": "it's"},
-        {"velocity_source": "x", "observer_discretization": "y"},
+        {"velocity_source": 0, "observer_discretization": "y"},
     ],
 )
 def test_bad_parameters(lib, parameters: dict) -> None:

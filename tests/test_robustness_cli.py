@@ -92,7 +92,7 @@ def _bad_crc(name: str, data: bytes) -> bytes:
 def _nan_wall(name: str, data: bytes) -> bytes:
     if not name.endswith(".ssv"):
         return data
-    return re.sub(rb'(name="plant.wall_k">\s*<ssv:Real value=")[^"]*', rb"\1NaN", data)
+    return re.sub(rb'(name="wall_k">\s*<ssv:Real value=")[^"]*', rb"\1NaN", data)
 
 
 def _wrong_guid(name: str, data: bytes) -> bytes:

@@ -151,6 +151,12 @@ def crafted_state(s: Slave, blob: bytes, name: str, field: str) -> bytes:
         "k_next_negative": lambda: _poke(blob, CONTROLLER_K_NEXT, "<q", -(2**62)),
         "source_enum": lambda: _poke(blob, CONTROLLER_SOURCE, "<i", 1000),
         "string_unterminated": lambda: blob[:at] + b"A" * 64 + blob[at + 64 :],
+        # a gain (tunable, checked by the model, not only by its minimum) at 0
+        "gain_zero": lambda: _poke(blob, HEADER + 8 * s.vr["G1"], "<d", 0.0),
+        # velocity_source (an Integer since issue 12) no longer the one the model runs with
+        "source_parameter": lambda: _poke(
+            blob, HEADER + 8 * n + 4 * s.vr["velocity_source"], "<i", 3
+        ),
         "max_samples_zero": lambda: _poke(
             blob, HEADER + 8 * n + 4 * s.vr["max_samples_per_step"], "<i", 0
         ),
@@ -284,8 +290,8 @@ COMMON_FIELDS = ["phase", "phase_of_model_exchange", "me_time_set", "event_switc
                  "last_time", "start_time", "parameter_nan", "parameter_below_min"]  # fmt: skip
 PLANT_FIELDS = [*COMMON_FIELDS, "rng_index_huge", "rng_index_negative", "rng_flag", "boolean",
                 "input_inf"]  # fmt: skip
-CONTROLLER_FIELDS = [*COMMON_FIELDS, "k_next_negative", "source_enum", "string_unterminated",
-                     "max_samples_zero"]  # fmt: skip
+CONTROLLER_FIELDS = [*COMMON_FIELDS, "k_next_negative", "source_enum", "source_parameter",
+                     "gain_zero", "max_samples_zero"]  # fmt: skip
 
 
 @needs_cc

@@ -158,14 +158,14 @@ def test_relative_source_with_dot_segments_and_escapes_is_read(archive, tmp_path
 
 
 def test_parameter_set_sources_are_resolved_the_same_way(archive, tmp_path):
-    edit = ssd_edit(b'source="resources/observer.ssv"', b'source="/etc/passwd"')
+    edit = ssd_edit(b'source="resources/observer_plant.ssv"', b'source="/etc/passwd"')
     text = refused(repack(archive, tmp_path / "bad.ssp", {SSD: edit}), "absolute path")
     assert "parameter binding" in text
 
 
 def test_missing_parameter_set_names_the_member(archive, tmp_path):
-    bad = repack(archive, tmp_path / "bad.ssp", drop=("resources/difference.ssv",))
-    text = refused(bad, "resources/difference.ssv is missing from the archive")
+    bad = repack(archive, tmp_path / "bad.ssp", drop=("resources/difference_plant.ssv",))
+    text = refused(bad, "resources/difference_plant.ssv is missing from the archive")
     assert "SystemStructure.ssd" not in text.split(":")[-1]
 
 
@@ -246,13 +246,13 @@ def test_member_count_and_sizes_are_capped(archive, tmp_path):
     refused(big, r"'extra/big.bin' unpacks to 3145728 bytes \(limit 1048576\)",
             limits=Limits(member_bytes=1 << 20))  # fmt: skip
     refused(big, "unpacks to more than 2000000 bytes", limits=Limits(total_bytes=2_000_000))
-    refused(archive, r"has 6 members \(limit 5\)", limits=Limits(members=5))
+    refused(archive, r"has 11 members \(limit 5\)", limits=Limits(members=5))
     refused(archive, "SystemStructure.ssd' is 16", limits=Limits(xml_bytes=1000))
 
 
 def test_parameter_set_reading_is_bounded(archive, tmp_path):
     """One .ssv bound many times cannot make the reader parse without end."""
-    many = b'<ssd:ParameterBinding source="resources/observer.ssv" />' * 30
+    many = b'<ssd:ParameterBinding source="resources/observer_controller.ssv" />' * 30
     edit = ssd_edit(b"<ssd:ParameterBindings>", b"<ssd:ParameterBindings>" + many)
     bad = repack(archive, tmp_path / "many.ssp", {SSD: edit})
     refused(bad, "parameter sets bound add up to more than 80000 bytes",
@@ -301,8 +301,8 @@ def bad_crc(archive: Path, out: Path) -> Path:
         for info, data in members(archive):
             z.writestr(info.filename, data)
     raw = bytearray(out.read_bytes())
-    at = raw.find(b'name="plant.wall_k"')  # inside the first .ssv
-    assert at > 0
+    at = raw.find(b'<ssv:Parameter name="wall_k"') + 16  # inside the first plant .ssv
+    assert at > 16
     raw[at + 6] ^= 0x01
     out.write_bytes(bytes(raw))
     return out
@@ -380,8 +380,8 @@ def test_malformed_ssd_gives_one_ssp_error(archive, tmp_path, old, new, message)
 
 def test_malformed_parameter_set_names_the_file(archive, tmp_path):
     edit = ssd_edit(b'<ssv:Real value="0.65"', b'<ssv:Real value="lots"')
-    bad = repack(archive, tmp_path / "bad.ssv.ssp", {"resources/observer.ssv": edit})
-    refused(bad, "malformed parameter set in .*resources/observer.ssv")
+    bad = repack(archive, tmp_path / "bad.ssv.ssp", {"resources/observer_plant.ssv": edit})
+    refused(bad, "malformed parameter set in .*resources/observer_plant.ssv")
 
 
 def test_cli_gives_one_line_for_each_bad_archive(archive, tmp_path):
@@ -402,8 +402,8 @@ def test_cli_gives_one_line_for_each_bad_archive(archive, tmp_path):
         "symlink": (repack(archive, tmp_path / "d.ssp", add=[(link, b"/etc/passwd")]),
                     "member 'resources/link.fmu' is a symbolic link"),
         "bad CRC": (bad_crc(archive, tmp_path / "e.ssp"), "is corrupt (bad CRC)"),
-        "missing ssv": (repack(archive, tmp_path / "f.ssp", drop=("resources/measured.ssv",)),
-                        "resources/measured.ssv is missing from the archive"),
+        "missing ssv": (repack(archive, tmp_path / "f.ssp", drop=("resources/measured_plant.ssv",)),
+                        "resources/measured_plant.ssv is missing from the archive"),
         "duplicate component": (
             repack(archive, tmp_path / "g.ssp", {SSD: ssd_edit(
                 b'<ssd:Component name="plant"', b'<ssd:Component name="controller"')}),
@@ -575,3 +575,28 @@ def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
     assert not failures, failures[:3]
     assert outcomes["ok"] >= 5 and outcomes["SspError"] > 100, outcomes  # both paths exercised
     assert leftovers(private_tmp) == []
+
+
+# --- SSP variants: one system description per scenario -------------------------------------------
+
+
+def test_variant_ssds_are_the_scenarios(archive, tmp_path):
+    with read_ssp(archive) as desc:
+        assert desc.variants == {"observer": SSD, "difference": "difference.ssd",
+                                 "measured": "measured.ssd"}  # fmt: skip
+        difference = {p.name: p.value for p in desc.parameter_sets["difference"]}
+        assert difference["controller.velocity_source"] == "2"
+        assert difference["plant.wall_k"] == "10000.0"  # each component's binding, merged
+    with read_ssp(archive, ssd="difference.ssd") as desc:  # one named variant alone
+        assert list(desc.parameter_sets) == ["difference"]
+    refused(archive, r"has no system description 'nope.ssd' \(have \['SystemStructure.ssd', "
+            "'difference.ssd', 'measured.ssd'\\]\\)", ssd="nope.ssd")  # fmt: skip
+
+
+def test_a_variant_of_another_system_is_refused(archive, tmp_path):
+    def drop_tau3(data: bytes) -> bytes:  # a valid system alone, but not the default's
+        return re.sub(rb'<ssd:Connection startElement="controller" startConnector="tau3"[^>]*/>',
+                      b"", data)  # fmt: skip
+
+    bad = repack(archive, tmp_path / "variant.ssp", {"measured.ssd": drop_tau3})
+    refused(bad, "variant measured.ssd describes another system than SystemStructure.ssd")

@@ -82,7 +82,7 @@ def test_dask_sweep_equals_single_runs(native_ssp, tmp_path, capsys):
 
 def test_serial_rows_and_failed_runs_are_rows(native_ssp):
     plan = sweep.plan_sweep(
-        ["controller.velocity_source=observer,bogus", "system.rate=400"], ssp=native_ssp, stop=0.5
+        ["controller.velocity_source=observer,7", "system.rate=400"], ssp=native_ssp, stop=0.5
     )
     rows = sweep.run_serial(plan)
     assert [r["status"] for r in rows] == ["ok", "failed"]

@@ -54,9 +54,10 @@ def c_config(
         number = "0.0" if v.type == "String" else _c_double(v.start)
         has_min = "1" if v.min is not None else "0"
         minimum = _c_double(v.min) if v.min is not None else "0.0"
+        tunable = "1" if v.fmi_variability == "tunable" else "0"
         lines.append(
             f'    {{"{v.name}", {C_TYPES[v.type]}, {C_CAUSALITY[v.causality]}, {number}, {start},'
-            f" {has_min}, {minimum}}},"
+            f" {has_min}, {minimum}, {tunable}}},"
         )
     lines += ["};", ""]
     if model_exchange:

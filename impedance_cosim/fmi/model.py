@@ -46,6 +46,11 @@ class FmuModel:
         """Advance from t to t + h with the given inputs; raise ModelError if that is impossible."""
         raise NotImplementedError
 
+    def tune(self, parameters: dict[str, Any]) -> None:
+        """Take new values of the tunable parameters (all parameters given) from the next step on;
+        raise ModelError naming a bad value (the model then keeps the old ones)."""
+        raise ModelError(f"{self.MODEL_NAME} has no tunable parameters")
+
     def outputs(self) -> tuple:
         """Current output values, in the order of the table's outputs."""
         raise NotImplementedError

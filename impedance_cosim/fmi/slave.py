@@ -73,7 +73,7 @@ class ModelSlave:
             else:
                 self._values[v.name] = v.start
                 getter = self._value_getter(v.name)
-                setter = self._value_setter(v.name, v.causality, _CONVERT[v.type])
+                setter = self._value_setter(v, _CONVERT[v.type])
             self.register_variable(
                 var_cls(
                     v.name,
@@ -90,10 +90,22 @@ class ModelSlave:
     def _value_getter(self, name: str):
         return lambda: self._values[name]
 
-    def _value_setter(self, name: str, causality: str, convert):
+    def _value_setter(self, v: Any, convert):
+        name = v.name
+        tunable = v.causality == "parameter" and v.fmi_variability == "tunable"
+
         def setter(value: Any) -> None:
-            if causality == "parameter" and self._phase >= STEPPING:
-                self._fail(f"parameter {name} is fixed: it cannot be set after initialization")
+            if v.causality == "parameter" and self._phase >= STEPPING:
+                if not tunable or self._phase == TERMINATED or self.model is None:
+                    self._fail(f"parameter {name} is fixed: it cannot be set after initialization")
+                # FMI 2.0: a tunable parameter may be set between communication points; the
+                # model checks the new value and uses it from its next sample on.
+                params = {n: self._values[n] for n in self._params}
+                params[name] = convert(value)
+                try:
+                    self.model.tune(params)
+                except ModelError as exc:
+                    self._fail(str(exc))
             self._values[name] = convert(value)
             if self._phase <= INITIALIZING:
                 self._dirty = True

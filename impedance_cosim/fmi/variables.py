@@ -42,7 +42,76 @@ UNITS: dict[str, dict[str, int]] = {
     "Hz": {"s": -1},
 }
 
+# The physical quantity of each unit (FMI TypeDefinitions: one SimpleType per unit) and the unit
+# a tool should show a value in (FMI DisplayUnit: display = factor * value + offset).
+QUANTITIES: dict[str, str] = {
+    "1": "Dimensionless",
+    "m": "Length",
+    "rad": "Angle",
+    "s": "Time",
+    "kg": "Mass",
+    "N": "Force",
+    "N.m": "Torque",
+    "N/m": "TranslationalStiffness",
+    "N.s/m": "TranslationalDamping",
+    "N.m/rad": "RotationalStiffness",
+    "N.m.s/rad": "RotationalDamping",
+    "kg.m2": "MomentOfInertia",
+    "m/s": "Velocity",
+    "m/s2": "Acceleration",
+    "rad/s": "AngularVelocity",
+    "rad/s2": "AngularAcceleration",
+    "1/s": "Rate",
+    "Hz": "Frequency",
+}
+DEG = 180.0 / math.pi
+DISPLAY_UNITS: dict[str, tuple[str, float, float]] = {
+    "rad": ("deg", DEG, 0.0),
+    "rad/s": ("deg/s", DEG, 0.0),
+    "rad/s2": ("deg/s2", DEG, 0.0),
+    "N.m/rad": ("N.m/deg", 1.0 / DEG, 0.0),
+    "N.m.s/rad": ("N.m.s/deg", 1.0 / DEG, 0.0),
+}
+
 PYTHON_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
+
+
+# How an Enumeration variable is declared in the modelDescription. Measured with libcosimpy 0.0.6:
+# libcosim ignores FMI 2.0 Enumeration variables ("FMI 2.0 Enumeration variable type not
+# supported, variable ... will be ignored", so an SSP binding cannot reach it) and aborts the
+# process on an SSP Enumeration connector or value ("Don't know how to handle Enumeration type").
+# So False: an Integer with min/max and a declared type whose description lists the items.
+FMI_ENUMERATIONS = False
+ENUMERATIONS: dict[str, Enumeration] = {}  # every Enumeration defined, by type name
+
+
+@dataclass(frozen=True)
+class Enumeration:
+    """An FMI 2.0 Enumeration type: its name and items (name, description), valued 1, 2, ...
+    Read and written through fmi2Get/SetInteger, so the models see the item's value."""
+
+    name: str
+    description: str
+    items: tuple[tuple[str, str], ...]
+
+    def __post_init__(self) -> None:
+        ENUMERATIONS[self.name] = self
+
+    def value(self, item: str) -> int:
+        """The value of an item name (ValueError naming the choices if unknown)."""
+        names = [n for n, _ in self.items]
+        if item not in names:
+            raise ValueError(f"must be one of {', '.join(names)} (got {item!r})")
+        return names.index(item) + 1
+
+    def item(self, value: int) -> str:
+        """The item name of a value (ValueError if out of range)."""
+        if not (isinstance(value, int) and 1 <= value <= len(self.items)):
+            raise ValueError(f"must be one of {self.choices()} (got {value!r})")
+        return self.items[value - 1][0]
+
+    def choices(self) -> str:
+        return ", ".join(f"{i + 1} ({n})" for i, (n, _) in enumerate(self.items))
 
 
 @dataclass(frozen=True)
@@ -58,11 +127,19 @@ class Variable:
     min: float | None = None
     max: float | None = None
     derivative: str | None = None  # name of the state this variable is the time derivative of
+    enumeration: Enumeration | None = None  # an Integer start value, declared as this Enumeration
 
     @property
     def type(self) -> str:
-        """FMI type name (Real, Integer, Boolean, String) from the start value's Python type."""
+        """Value type (Real, Integer, Boolean, String) from the start value's Python type: how
+        the value is got and set (an Enumeration through Integer)."""
         return PYTHON_TYPES[type(self.start)]
+
+    @property
+    def fmi_type(self) -> str:
+        """FMI type element of the modelDescription: Enumeration for an enumeration (if
+        FMI_ENUMERATIONS), else type."""
+        return "Enumeration" if self.enumeration and FMI_ENUMERATIONS else self.type
 
     @property
     def fmi_variability(self) -> str:
@@ -118,8 +195,10 @@ def parameters_of(params: Any) -> list[Variable]:
                 start=getattr(params, f.name),
                 description=meta.get("description", f.name),
                 unit=meta.get("unit") if isinstance(getattr(params, f.name), float) else None,
+                variability="tunable" if meta.get("tunable") else None,
                 min=meta.get("min"),
                 max=meta.get("max"),
+                enumeration=meta.get("enumeration"),
             )
         )
     return out
@@ -140,6 +219,31 @@ def vector(
         )
         for i, n in enumerate(names)
     ]
+
+
+SAMPLED_INPUTS = "sampled-inputs"  # output_dependencies of a sampled-data model (see below)
+
+
+def _type_definitions(root: ET.Element, units: list[str], variables: list[Variable]) -> None:
+    """TypeDefinitions: one Real SimpleType per unit used (its quantity, unit and display unit)
+    and every Enumeration the variables declare."""
+    types = ET.SubElement(root, "TypeDefinitions")
+    for u in units:
+        attrs = {"quantity": QUANTITIES[u], "unit": u}
+        if u in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[u][0]
+        ET.SubElement(ET.SubElement(types, "SimpleType", {"name": QUANTITIES[u]}), "Real", attrs)
+    enums = {v.enumeration.name: v.enumeration for v in variables if v.enumeration}
+    for e in enums.values():
+        if not FMI_ENUMERATIONS:  # an Integer type documenting the values
+            text = f"{e.description}: {e.choices()}"
+            st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": text})
+            ET.SubElement(st, "Integer", {"min": "1", "max": str(len(e.items))})
+            continue
+        st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": e.description})
+        items = ET.SubElement(st, "Enumeration")
+        for k, (name, text) in enumerate(e.items, 1):
+            ET.SubElement(items, "Item", {"name": name, "value": str(k), "description": text})
 
 
 def _fmt(value: float | int | bool | str) -> str:
@@ -169,7 +273,8 @@ def model_description(
 
     output_dependencies: None means outputs may depend on every input (conservative); "" declares
     that no output depends directly on an input (no algebraic loop through this FMU); under
-    Model Exchange the outputs then depend on the continuous states only."""
+    Model Exchange the outputs then depend on the continuous states only. SAMPLED_INPUTS: every
+    output depends on every input, but only at sample instants (dependenciesKind "discrete")."""
     if model_exchange:
         variables = [*variables, *derivative_variables(variables, model_exchange)]
     index = {v.name: i + 1 for i, v in enumerate(variables)}
@@ -222,13 +327,18 @@ def model_description(
         for name in source_files or ():
             ET.SubElement(files, "File", {"name": name})
     used = sorted({v.unit for v in variables if v.unit})
-    unknown = [u for u in used if u not in UNITS]
+    unknown = [u for u in used if u not in UNITS or u not in QUANTITIES]
     if unknown:
         raise ValueError(f"units {unknown} are not defined in UNITS")
     units = ET.SubElement(root, "UnitDefinitions")
     for u in used:
         unit = ET.SubElement(units, "Unit", {"name": u})
         ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
+        if u in DISPLAY_UNITS:
+            name, factor, offset = DISPLAY_UNITS[u]
+            display = {"name": name, "factor": repr(factor), "offset": repr(offset)}
+            ET.SubElement(unit, "DisplayUnit", display)
+    _type_definitions(root, used, variables)
     cats = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES.items():
         ET.SubElement(cats, "Category", {"name": name, "description": text})
@@ -246,26 +356,41 @@ def model_description(
             attrs["initial"] = "calculated"
         sv = ET.SubElement(mv, "ScalarVariable", attrs)
         type_attrs: dict[str, str] = {}
+        if v.enumeration:
+            type_attrs["declaredType"] = v.enumeration.name
+            if not FMI_ENUMERATIONS:
+                type_attrs.update(min="1", max=str(len(v.enumeration.items)))
+        if v.unit and v.type == "Real":
+            type_attrs["declaredType"] = QUANTITIES[v.unit]
         if v.derivative:
             type_attrs["derivative"] = str(index[v.derivative])
         if v.unit and v.type == "Real":
             type_attrs["unit"] = v.unit
+            if v.unit in DISPLAY_UNITS:
+                type_attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
         if v.min is not None:
             type_attrs["min"] = _fmt(v.min)
         if v.max is not None:
             type_attrs["max"] = _fmt(v.max)
         if v.causality not in ("output", "local"):
             type_attrs["start"] = _fmt(v.start)
-        ET.SubElement(sv, v.type, type_attrs)
+        ET.SubElement(sv, v.fmi_type, type_attrs)
     ms = ET.SubElement(root, "ModelStructure")
     outs = ET.SubElement(ms, "Outputs")
     if output_dependencies == "" and model_exchange:
         # the knowns are the inputs and the continuous states (FMI 2.0, section 2.2.8)
         output_dependencies = " ".join(str(index[s]) for s in model_exchange.states)
+    if output_dependencies == SAMPLED_INPUTS:
+        inputs = [str(i + 1) for i, v in enumerate(variables) if v.causality == "input"]
+        deps = {"dependencies": " ".join(inputs),
+                "dependenciesKind": " ".join(["discrete"] * len(inputs))}  # fmt: skip
+    elif output_dependencies is None:
+        deps = {}
+    else:
+        deps = {"dependencies": output_dependencies}
     for i, v in enumerate(variables):
         if v.causality == "output":
-            dep = {} if output_dependencies is None else {"dependencies": output_dependencies}
-            ET.SubElement(outs, "Unknown", {"index": str(i + 1), **dep})
+            ET.SubElement(outs, "Unknown", {"index": str(i + 1), **deps})
     if model_exchange and model_exchange.states:
         ders = ET.SubElement(ms, "Derivatives")
         for v in variables:

@@ -204,7 +204,6 @@ static void str_repr(const char *s, char *buf, size_t size)
     snprintf(buf, size, "%s", out);
 }
 
-
 /* --- virtual trajectory, observer, impedance law --------------------------------------------- */
 
 static void virtual_trajectory(const Params *p, double t, double xv[3], double xv_dot[3],
@@ -400,18 +399,33 @@ static int take_sample(Data *d, const Params *p, int64_t k, const double q[3], c
     return 0;
 }
 
-int model_initialize(Data *d, char *msg)
+/* ControllerParams.validate: the gains, period and limits that must be > 0 */
+static int check_positive(const Data *d, char *msg)
 {
-    /* ControllerParams.POSITIVE */
     static const int positive[] = {VR_K1, VR_K2, VR_K3, VR_G1, VR_G2, VR_G3, VR_B1, VR_B2, VR_B3,
                                    VR_sample_period, VR_tau_max1, VR_tau_max2, VR_tau_max3};
+    char buf[32];
+    for (size_t k = 0; k < sizeof positive / sizeof positive[0]; k++) {
+        const double value = d->r[positive[k]];
+        if (isfinite(value) && !(value > 0.0)) {
+            float_repr(value, buf, sizeof buf);
+            return fail(msg, "parameter %s must be > 0 (got %s)", VARS[positive[k]].name, buf);
+        }
+    }
+    return 0;
+}
+
+/* The gains (K, G, B), force setpoint and trajectory may change between steps: model_step reads
+ * them at every step; their ranges are those of initialization (the glue checked the minimums). */
+int model_check_tunable(const Data *d, char *msg) { return check_positive(d, msg); }
+
+int model_initialize(Data *d, char *msg)
+{
     ModelState *m = &d->m;
     Params p;
     double q[3], f[3], qd_meas[3];
     char buf[2][32];
-    const char *source = d->s[VR_velocity_source];
-    size_t k;
-    int found = -1;
+    const int source = d->i[VR_velocity_source];
     read_params(d, &p);
     /* ArmParams.validate (the glue has checked finiteness and minimums) */
     if (p.arm.a1 <= 0.0 || p.arm.a2 <= 0.0) {
@@ -420,24 +434,13 @@ int model_initialize(Data *d, char *msg)
         return fail(msg, "link lengths a1, a2 must be > 0 (got a1=%s, a2=%s)", buf[0], buf[1]);
     }
     /* ControllerParams.validate */
-    for (k = 0; k < sizeof positive / sizeof positive[0]; k++) {
-        const double value = d->r[positive[k]];
-        if (isfinite(value) && !(value > 0.0)) {
-            float_repr(value, buf[0], sizeof buf[0]);
-            return fail(msg, "parameter %s must be > 0 (got %s)", VARS[positive[k]].name, buf[0]);
-        }
+    if (check_positive(d, msg)) {
+        return 1;
     }
-    for (k = 0; k < 3; k++) {
-        if (strncmp(source, VELOCITY_SOURCES[k], STRING_MAX) == 0) {
-            found = (int)k;
-        }
-    }
-    if (found < 0) {
-        char text[4 * STRING_MAX + 3];
-        str_repr(source, text, sizeof text);
+    if (source < 1 || source > 3) { /* the VelocitySource enumeration's items, valued 1..3 */
         return fail(msg,
-                    "parameter velocity_source must be one of %s, %s, %s (got %s)",
-                    VELOCITY_SOURCES[0], VELOCITY_SOURCES[1], VELOCITY_SOURCES[2], text);
+                    "parameter velocity_source must be one of 1 (%s), 2 (%s), 3 (%s) (got %d)",
+                    VELOCITY_SOURCES[0], VELOCITY_SOURCES[1], VELOCITY_SOURCES[2], source);
     }
     if (p.discretization < 0) {
         char text[4 * STRING_MAX + 3];
@@ -447,7 +450,7 @@ int model_initialize(Data *d, char *msg)
                     DISCRETIZATIONS[0], DISCRETIZATIONS[1], DISCRETIZATIONS[2], text);
     }
     memset(m, 0, sizeof *m);
-    m->velocity_source = found;
+    m->velocity_source = source - 1;
     m->start_time = d->start_time;
     if (split_inputs(d, q, f, qd_meas, msg)) {
         return 1;
@@ -521,7 +524,6 @@ int model_step(Data *d, double t, double h, char *msg)
 int model_check_state(const Data *d, char *msg)
 {
     const ModelState *m = &d->m;
-    const char *source = d->s[VR_velocity_source];
     if (!isfinite(m->t) || !isfinite(m->start_time)) {
         return fail(msg, "controller time not finite");
     }
@@ -535,7 +537,7 @@ int model_check_state(const Data *d, char *msg)
                     (long long)m->held_input_samples);
     }
     if (m->velocity_source < SOURCE_OBSERVER || m->velocity_source > SOURCE_MEASURED ||
-        strncmp(source, VELOCITY_SOURCES[m->velocity_source], STRING_MAX) != 0) {
+        m->velocity_source != d->i[VR_velocity_source] - 1) {
         return fail(msg, "controller velocity source %d does not match velocity_source",
                     (int)m->velocity_source);
     }

@@ -337,6 +337,15 @@ static int euler_steps(PlantCtx *c, double y[ODE_N], double h, int n, int *mode,
 
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
 
+/* The plant has no tunable parameters (the glue refuses every parameter set after
+ * initialization): nothing beyond the glue's checks. */
+int model_check_tunable(const Data *d, char *msg)
+{
+    (void)d;
+    (void)msg;
+    return 0;
+}
+
 int model_initialize(Data *d, char *msg)
 {
     ModelState *m = &d->m;

@@ -324,7 +324,11 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
                 return ERROR(inst, "variable %s is computed by the model: it cannot be set",
                              v->name);
             }
-            if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION) {
+            /* FMI 2.0: after initialization only tunable parameters may be set, between
+             * steps (co-simulation) or in Event Mode (Model Exchange) */
+            if (v->causality == C_PARAMETER && inst->s.phase > S_INITIALIZATION &&
+                !(v->tunable &&
+                  (inst->s.phase == S_STEP_COMPLETE || inst->s.phase == S_EVENT_MODE))) {
                 return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
                              v->name);
             }
@@ -343,6 +347,16 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
         return me_update(inst);
     }
     return fmi2OK;
+}
+
+static int sets_parameter(const fmi2ValueReference vr[], size_t nvr)
+{
+    for (size_t k = 0; k < nvr; k++) {
+        if (VARS[vr[k]].causality == C_PARAMETER) {
+            return 1;
+        }
+    }
+    return 0;
 }
 
 static void mark_dirty(Instance *inst)
@@ -422,6 +436,15 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
             return ERROR(inst, "input %s is not finite (%g)", v->name, value[k]);
         }
         if (v->causality == C_PARAMETER && check_parameter((int)vr[k], value[k], inst->msg)) {
+            return ERROR(inst, "%s", inst->msg);
+        }
+    }
+    if (inst->s.phase > S_INITIALIZATION && sets_parameter(vr, nvr)) {
+        Data tmp = inst->s.d; /* tunable parameters: the model checks the new values */
+        for (size_t k = 0; k < nvr; k++) {
+            tmp.r[vr[k]] = value[k];
+        }
+        if (model_check_tunable(&tmp, inst->msg)) {
             return ERROR(inst, "%s", inst->msg);
         }
     }
@@ -586,7 +609,8 @@ static int check_snapshot(const Snapshot *s, fmi2Type type, char *msg)
     built = s->phase >= S_STEP_COMPLETE || (s->phase == S_INITIALIZATION && !s->dirty);
     /* (under Model Exchange, states and inputs may change the outputs after initialization:
      * dirty is then legitimately 1 in event or continuous-time mode, with the model built) */
-    return built ? model_check_state(&s->d, msg) : 0;
+    /* (tunable parameters may have changed since initialization: their model-level checks) */
+    return built ? model_check_tunable(&s->d, msg) || model_check_state(&s->d, msg) : 0;
 }
 
 /* A pointer from fmi2GetFMUstate / fmi2DeSerializeFMUstate of this FMU, not yet freed (as far

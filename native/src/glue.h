@@ -35,6 +35,7 @@ typedef struct {
     const char *start_string; /* String start value */
     int has_min;
     double min;
+    int tunable; /* a parameter that may be set between steps (CS) or in Event Mode (ME) */
 } VarInfo;
 
 #include "config.h" /* N_VARS, VR_<name>, MODEL_IDENTIFIER_STR, VARS[] */
@@ -50,6 +51,9 @@ typedef struct {
 
 int model_initialize(Data *d, char *msg);
 int model_step(Data *d, double t, double h, char *msg);
+/* Check new values of tunable parameters (set into d after initialization); 0 if usable, else
+ * 1 with msg set. The model reads them from its next step on. */
+int model_check_tunable(const Data *d, char *msg);
 /* A ModelState from outside (a deserialized FMU state), checked before the model may use it:
  * every counter, index and enumeration in range, and the reals the model needs finite (the glue
  * has checked the parameters and inputs in d). 0 if usable, else 1 with the reason in msg. */

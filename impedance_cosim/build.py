@@ -325,4 +325,8 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
             built.append(build_ssp(out_dir, name, fmu_dir))
             for s in SCENARIOS:  # one archive per scenario, for engines without SSP variants
                 built.append(build_ssp(out_dir, f"{name}-{s}", fmu_dir, scenario=s))
+        if native:
+            from impedance_cosim.build3 import build_fmi3  # the FMI 3.0 edition (fmus/fmi3/)
+
+            built += build_fmi3(out_dir)
     return built

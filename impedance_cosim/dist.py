@@ -52,7 +52,9 @@ def expected_members() -> list[str]:
 
     systems = [f"{base}{s}.ssp" for base in ("PaperScenario", "PaperScenario-native")
                for s in ("", *(f"-{name}" for name in SCENARIOS))]  # fmt: skip
-    return names + systems
+    fmi3 = ["PumaPlant", "ImpedanceController", "ImpedanceControllerClocked"] if native else []
+    names += [f"fmi3/{n}.fmu" for n in fmi3]
+    return names + systems + (["PaperScenario-fmi3.ssp"] if native else [])
 
 
 def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
@@ -103,7 +105,9 @@ def _fmu_line(name: str, data: bytes) -> str:
         md = ET.fromstring(z.read("modelDescription.xml"))
         platforms = sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/")})
         sources = any(n.startswith("sources/") for n in z.namelist())
-    kinds = [k for k in ("ModelExchange", "CoSimulation") if md.find(k) is not None]
+    kinds = [k for k in ("ModelExchange", "CoSimulation", "ScheduledExecution")
+             if md.find(k) is not None]  # fmt: skip
+    kinds.insert(0, f"FMI {md.get('fmiVersion')}")
     where = ", ".join(platforms) + (", sources" if sources else "")
     about = textwrap.fill(md.get("description", ""), 94, initial_indent=" " * 6,
                           subsequent_indent=" " * 6)  # fmt: skip
@@ -125,7 +129,8 @@ Each FMU documents itself: open documentation/index.html inside it (unzip it fir
 lists every variable with unit, range, default and meaning, the equations and the interfaces.
 
 FMUs (fmus/: the Python flavour, which needs a Python host such as fmpy; fmus/native/: the
-same models in C99, for any FMI host):
+same models in C99, for any FMI host; fmus/fmi3/: the C99 models as FMI 3.0, the controller
+also with its sampling as an FMI 3.0 clock, and fmus/fmi3/python/ the Python ones):
 {fmus}
 Systems (SSP 1.0: the two FMUs wired; each scenario (observer, difference, measured) is a system
 description binding its own parameter set: in PaperScenario*.ssp as SSP variants

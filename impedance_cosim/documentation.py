@@ -29,7 +29,8 @@ font-family:serif;font-size:110%}pre,code{background:#f4f4f4}pre{padding:.4em}""
 
 def documentation_members(model_description: bytes, members: list[str], flavour: str) -> dict:
     """The documentation members of an FMU (name -> bytes) for its modelDescription.xml and the
-    names of its other members (binaries, sources); flavour is "pythonfmu" or "native C99"."""
+    names of its other members (binaries, sources); flavour is "pythonfmu", "pythonfmu3" or
+    "native C99"."""
     root = ET.fromstring(model_description)
     out = {
         INDEX: index_html(root, members, flavour).encode("utf-8"),
@@ -50,6 +51,12 @@ def external_dependencies(model_name: str, flavour: str) -> str:
             "A Python 3 host process (e.g. fmpy, libcosimpy, ecospy): the binaries are pythonfmu"
             " 0.7 wrappers that run resources/*.py in the Python of the process that loads them"
             " (standard library only). They do not load in C hosts: use the native FMUs there."
+        )
+    if flavour == "pythonfmu3":
+        lines.append(
+            "A Python 3 host process with FMI 3.0 support (e.g. fmpy): the binaries are pythonfmu3"
+            " 0.3.4 wrappers that run resources/*.py in the Python of the process that loads them"
+            " (standard library only). For C hosts use the native FMI 3.0 FMUs."
         )
     if model_name == "BridgePlant":
         lines.append(
@@ -78,6 +85,8 @@ def _table(head: list[str], rows: list[list[str]], raw: bool = False) -> str:
 def variables_of(root: ET.Element) -> list[dict[str, str]]:
     """Every ScalarVariable of a modelDescription: name, valueReference, causality, variability,
     initial, type, unit, min, max, start, description (empty strings where absent)."""
+    if root.get("fmiVersion", "").startswith("3"):
+        return _variables_of3(root)
     out = []
     for sv in root.iter("ScalarVariable"):
         typ = next(iter(sv))
@@ -86,6 +95,22 @@ def variables_of(root: ET.Element) -> list[dict[str, str]]:
         row["type"] = typ.tag
         row.update({k: typ.get(k, "") for k in ("unit", "min", "max", "start")})
         row["description"] = sv.get("description", "")
+        out.append(row)
+    return out
+
+
+def _variables_of3(root: ET.Element) -> list[dict[str, str]]:
+    """variables_of for FMI 3.0, whose variables are elements named by their type."""
+    out = []
+    for el in root.find("ModelVariables") or ():
+        keys = ("name", "valueReference", "causality", "variability", "initial", "unit", "min",
+                "max", "start", "description")  # fmt: skip
+        row = {k: el.get(k, "") for k in keys}
+        row["causality"] = row["causality"] or "local"
+        row["type"] = el.tag
+        start = el.find("Start")
+        if start is not None:
+            row["start"] = start.get("value", "")
         out.append(row)
     return out
 
@@ -119,7 +144,7 @@ def _variables_section(root: ET.Element) -> str:
 
 def _interfaces_section(root: ET.Element, members: list[str]) -> str:
     parts = []
-    for kind in ("ModelExchange", "CoSimulation"):
+    for kind in ("ModelExchange", "CoSimulation", "ScheduledExecution"):
         el = root.find(kind)
         if el is None:
             continue
@@ -128,11 +153,21 @@ def _interfaces_section(root: ET.Element, members: list[str]) -> str:
         if sources:
             rows.append(["SourceFiles", ", ".join(sources)])
         parts.append(f"<h3>{kind}</h3>\n" + _table(["attribute", "value"], rows))
-    n_states = len(root.findall("ModelStructure/Derivatives/Unknown"))
-    parts.append(
-        f"<p>Continuous states: {n_states}. Event indicators: "
-        f"{_e(root.get('numberOfEventIndicators', '0'))}.</p>\n"
+    n_states = len(root.findall("ModelStructure/Derivatives/Unknown")) + len(
+        root.findall("ModelStructure/ContinuousStateDerivative")
     )
+    n_events = root.get("numberOfEventIndicators") or len(
+        root.findall("ModelStructure/EventIndicator")
+    )
+    parts.append(f"<p>Continuous states: {n_states}. Event indicators: {_e(n_events)}.</p>\n")
+    for clock in root.iter("Clock"):
+        parts.append(
+            f"<p>Clock <code>{_e(clock.get('name'))}</code>: {_e(clock.get('description'))}"
+            f" (intervalVariability {_e(clock.get('intervalVariability'))}; the importer reads"
+            " the interval with fmi3GetIntervalDecimal after initialization and calls"
+            " fmi3ActivateModelPartition at every tick, after setting the clocked inputs;"
+            " the clocked outputs are then the new sample's).</p>\n"
+        )
     platforms = sorted({m.split("/")[1] for m in members if m.count("/") >= 2
                         and m.startswith("binaries/")})  # fmt: skip
     files = {p: sorted(m.split("/", 2)[2] for m in members if m.startswith(f"binaries/{p}/"))
@@ -174,6 +209,9 @@ def _run_section(root: ET.Element, flavour: str) -> str:
     example = EXAMPLES.get(name)
     if example:
         lines.append(f"fmpy simulate {name}.fmu{interval} --start-values {example}")
+    scheduled = root.find("CoSimulation") is None and root.find("ScheduledExecution") is not None
+    if scheduled:
+        lines = lines[:1]  # fmpy simulate runs Co-Simulation and Model Exchange only
     if root.find("ModelExchange") is not None:
         lines.append(f"fmpy simulate {name}.fmu --interface-type ModelExchange --solver CVode")
     py = (
@@ -183,10 +221,20 @@ def _run_section(root: ET.Element, flavour: str) -> str:
         + (f", stop_time={stop}" if stop else "")
         + ")\nprint(result.dtype.names)"
     )
+    if scheduled:
+        py = (
+            "# Scheduled Execution: your host loop activates the clock at every tick\n"
+            "from fmpy.fmi3 import FMU3ScheduledExecution\n"
+            "# instantiate, enterInitializationMode, set parameters, exitInitializationMode,\n"
+            "# fmi3GetIntervalDecimal(clock), then at t = k * interval: set the inputs,\n"
+            "# fmi3ActivateModelPartition(instance, clock, t), get the outputs"
+        )
     host = (
-        "This is the Python flavour (pythonfmu): it runs in a Python host process such as fmpy."
-        if flavour == "pythonfmu"
-        else "This is the native (C99) flavour: it loads in any FMI 2.0 host, no Python needed."
+        f"This is the Python flavour ({flavour}): it runs in a Python host process such as fmpy."
+        if flavour.startswith("pythonfmu")
+        else "This is the native (C99) flavour: it loads in any FMI "
+        + root.get("fmiVersion", "2.0")
+        + " host, no Python needed."
     )
     exp_text = ", ".join(f"{k} = {v}" for k, v in exp.attrib.items()) if exp is not None else "none"
     return (
@@ -204,7 +252,8 @@ def index_html(root: ET.Element, members: list[str], flavour: str) -> str:
     name = root.get("modelName", "")
     starts = {v["name"]: v for v in variables_of(root)}
     meta = [[k, root.get(k, "")] for k in ("modelName", "description", "author", "version",
-            "copyright", "license", "generationTool", "guid", "fmiVersion")]  # fmt: skip
+            "copyright", "license", "generationTool", "guid", "instantiationToken", "fmiVersion")
+            if k not in ("guid", "instantiationToken") or root.get(k) is not None]  # fmt: skip
     meta.append(["flavour", flavour])
     needs = external_dependencies(name, flavour)
     return f"""<!DOCTYPE html>

@@ -16,7 +16,15 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from fmpy import calloc, extract, free, platform, read_model_description, sharedLibraryExtension
+from fmpy import (
+    calloc,
+    extract,
+    free,
+    platform,
+    platform_tuple,
+    read_model_description,
+    sharedLibraryExtension,
+)
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
@@ -38,9 +46,12 @@ class FmuError(RuntimeError):
 def check_fmu(fmu: Path, description: Any) -> None:
     """FmuError naming the problem unless the archive is intact (every member's CRC) and has a
     binary for this platform (checked once per file version)."""
-    if description.coSimulation is None:
+    # an FMI 3.0 Scheduled Execution FMU (a clocked model) runs as co-simulation (fmu3.py)
+    interface = description.coSimulation or getattr(description, "scheduledExecution", None)
+    if interface is None:
         raise FmuError(f"{fmu.name} is not a co-simulation FMU")
-    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}"
+    folder = platform_tuple if str(description.fmiVersion).startswith("3") else platform
+    binary = f"binaries/{folder}/{interface.modelIdentifier}"
     st = fmu.stat()
     problem = _archive_problem(str(fmu), st.st_mtime_ns, st.st_size, binary)
     if problem:
@@ -337,6 +348,7 @@ class FmuInstance:
 def fmi_value(kind: str, value: Any, name: str) -> Any:
     """value (a Python value or a text literal, e.g. from an .ssv file or the command line)
     converted to the Python value of an FMI type; ValueError naming the variable if invalid."""
+    kind = {"Float64": "Real", "Int32": "Integer"}.get(kind, kind)  # FMI 3.0 names
     try:
         if kind == "Real":
             return float(value)

@@ -164,22 +164,22 @@ def _cmd_swap(args: argparse.Namespace) -> int:
     from impedance_cosim import cli
     from impedance_cosim.ssp import read_ssp
 
-    ssp = Path(args.ssp) if args.ssp else cli.DEFAULT_SSP
-    if not args.ssp and cli._stale(ssp):
-        print("building the FMUs and the system archive ...", file=sys.stderr)
-        cli._cmd_build(argparse.Namespace(out=str(ssp.parent), only=None))
-    args.ssp = str(ssp)
     replace = {}
-    for item in args.replace:
+    for item in args.replace:  # cheap checks first, before any build
         comp, sep, path = item.partition("=")
         if not sep or not comp or not path:
             raise cli.CliError(f"--replace expects component=path/to/file.fmu (got {item!r})")
         replace[comp.strip()] = Path(path.strip())
     overrides = cli.parse_overrides(args.set or [])
-    system = read_ssp(ssp)
+    ssp = Path(args.ssp) if args.ssp else cli.DEFAULT_SSP
+    if not args.ssp and cli._stale(ssp):
+        print("building the FMUs and the system archive ...", file=sys.stderr)
+        cli._cmd_build(argparse.Namespace(out=str(ssp.parent), only=None))
+    args.ssp = str(ssp)
     problems = []
-    for comp, path in replace.items():
-        problems += replacement_problems(system, comp, path, args.scenario, overrides)
+    with read_ssp(ssp) as system:
+        for comp, path in replace.items():
+            problems += replacement_problems(system, comp, path, args.scenario, overrides)
     if problems:
         lines = "\n".join(f"  - {p}" for p in problems)
         raise cli.CliError(f"the replacement does not fit the system ({len(problems)}):\n{lines}")

@@ -43,6 +43,7 @@ import numpy as np
 from impedance_cosim import fastloop
 from impedance_cosim.fmi.variables import ENUMERATIONS
 from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, check_fmu, fmi_value
+from impedance_cosim.fmu3 import is_fmi3, open_fmu, ssp_type
 from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
 from impedance_cosim.results import Feed, Sink, size_problem
 from impedance_cosim.ssp import SspError, SystemDescription
@@ -93,7 +94,9 @@ def split_name(name: str) -> tuple[str, str]:
 def real_outputs(description: Any) -> list[str]:
     """Names of an FMU's Real outputs, in model order (the recorded signals)."""
     return [
-        v.name for v in description.modelVariables if v.causality == "output" and v.type == "Real"
+        v.name
+        for v in description.modelVariables
+        if v.causality == "output" and ssp_type(v.type) == "Real"
     ]
 
 
@@ -109,7 +112,7 @@ def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list
             continue
         if v.causality != c.kind:
             problems.append(f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD")
-        if v.type != c.type:
+        if ssp_type(v.type) != c.type:
             problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
         if c.type == "Real" and (v.unit or None) != (c.unit or None):
             problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
@@ -318,14 +321,17 @@ class Master:
         ordered: list[_Slot] = []
         try:
             for name in self.order:
-                ordered.append(_Slot(name, FmuInstance(self.fmu_files[name], name)))
+                ordered.append(_Slot(name, open_fmu(self.fmu_files[name], name)))
             self._wire(ordered)
             self._initialize(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
             error = self._check_row(names, data[0], t0)
-            fast = fastloop.load() if self.loop != "python" else None
+            fmi3 = [s.name for s in ordered if is_fmi3(s.fmu.description)]
+            if self.loop == "c" and fmi3:
+                raise MasterError(f"the C loop runs FMI 2.0 FMUs only ({', '.join(fmi3)}: 3.0)")
+            fast = fastloop.load() if self.loop != "python" and not fmi3 else None
             if self.loop == "c" and fast is None:
                 raise MasterError("the C loop cannot be compiled here (no C compiler?)")
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps

@@ -73,6 +73,12 @@ TOOLCHAINS = (
     ),
 )
 BY_PLATFORM = {t.platform: t for t in TOOLCHAINS}
+# FMI 3.0 names the same platforms by their tuples (FMI 3.0, section 2.5.1.1).
+FMI3_PLATFORMS = {
+    "linux64": "x86_64-linux",
+    "win64": "x86_64-windows",
+    "aarch64-linux": "aarch64-linux",
+}
 _noted: set[str] = set()
 
 
@@ -107,16 +113,19 @@ def compile_library(
         )
 
 
-def build_binaries(src: Path, model_identifier: str, c_files: list[str]) -> dict[str, bytes]:
+def build_binaries(
+    src: Path, model_identifier: str, c_files: list[str], fmi_version: int = 2
+) -> dict[str, bytes]:
     """Build the library for every platform whose compiler is present; returns
-    {"binaries/<platform>/<id><suffix>": bytes}. linux64 is required, the others are noted
-    when absent."""
+    {"binaries/<platform>/<id><suffix>": bytes} (FMI 3.0 platform tuples for fmi_version 3).
+    linux64 is required, the others are noted when absent."""
     binaries = {}
     for toolchain in TOOLCHAINS:
         if toolchain.platform != "linux64" and not toolchain.available():
             note_missing(toolchain)
             continue
-        name = f"binaries/{toolchain.platform}/{model_identifier}{toolchain.suffix}"
+        folder = FMI3_PLATFORMS[toolchain.platform] if fmi_version == 3 else toolchain.platform
+        name = f"binaries/{folder}/{model_identifier}{toolchain.suffix}"
         lib = Path(src).parent / name  # a DLL records its own file name: keep the final one
         lib.parent.mkdir(parents=True, exist_ok=True)
         compile_library(toolchain, src, c_files, lib)

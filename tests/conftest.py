@@ -62,3 +62,12 @@ def contact_torques(seconds: float, parameters: dict | None = None) -> list[tupl
         torques.append(tau)
         plant.do_step(i * DT, DT, tau)
     return torques
+
+
+@pytest.fixture(scope="session")
+def fmi3_dir(fmu_dir: Path, native_dir: Path) -> Path:
+    """The FMI 3.0 native FMUs (fmus/fmi3/) and PaperScenario-fmi3.ssp next to the others."""
+    from impedance_cosim.build3 import build_fmi3
+
+    build_fmi3(fmu_dir)
+    return fmu_dir / "fmi3"

@@ -14,7 +14,7 @@ from impedance_cosim.build import FMUS, REPO, build_fmu, build_ssp
 from impedance_cosim.cli import main
 from impedance_cosim.dist import DATE, NAME, build_dist, bundle, expected_members
 
-ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu")
+ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu", "fmi3/*.fmu")
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,8 @@ def test_building_twice_gives_identical_bytes(two_builds, fmu_dir: Path, native_
 def test_every_member_has_a_fixed_date_and_mode(two_builds):
     a, _ = two_builds
     zips = [*(a / "fmus").rglob("*.fmu"), *(a / "fmus").glob("*.ssp"), a / "dist" / f"{NAME}.zip"]
-    assert len(zips) == 14  # 5 FMUs, 8 systems, the bundle
+    python3 = list((a / "fmus" / "fmi3" / "python").glob("*.fmu"))  # with pythonfmu3 installed
+    assert len(zips) == len(expected_members()) + len(python3) + 1
     for path in zips:
         with zipfile.ZipFile(path) as z:
             for info in z.infolist():

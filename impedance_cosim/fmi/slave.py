@@ -48,6 +48,11 @@ class ModelSlave:
     """Mixin for pythonfmu.Fmi2Slave (list it first among the bases)."""
 
     model_class: type[FmuModel]
+    # the exporter's API (pythonfmu 0.7 here; slave3.py swaps in pythonfmu3's for FMI 3.0)
+    _var_types: dict[str, Any] = _PY_VAR
+    _causality: Any = Fmi2Causality
+    _variability: Any = Fmi2Variability
+    _error_status: Any = Fmi2Status.error
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)  # type: ignore[call-arg]
@@ -64,7 +69,7 @@ class ModelSlave:
         self._start_time = 0.0
         self.model: FmuModel | None = None
         for v in self._table:
-            var_cls = _PY_VAR[v.type]
+            var_cls = self._var_types[v.type]
             if v.causality == "output":
                 index = len(self._outputs)
                 self._outputs.append(v.start)
@@ -77,8 +82,8 @@ class ModelSlave:
             self.register_variable(
                 var_cls(
                     v.name,
-                    causality=getattr(Fmi2Causality, v.causality),
-                    variability=getattr(Fmi2Variability, v.fmi_variability),
+                    causality=getattr(self._causality, v.causality),
+                    variability=getattr(self._variability, v.fmi_variability),
                     description=v.description,
                     getter=getter,
                     setter=setter,
@@ -173,7 +178,7 @@ class ModelSlave:
         """Log an error through the FMU logger, and to stderr: pythonfmu 0.7 drops every log
         message (errors included) unless the host turned debug logging on."""
         text = f"{self.model_class.MODEL_NAME} '{self.instance_name}': {message}"
-        self.log(text, Fmi2Status.error)
+        self.log(text, self._error_status)
         print(f"error: {text}", file=sys.stderr, flush=True)
 
     def _fail(self, message: str) -> None:

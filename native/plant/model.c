@@ -386,7 +386,9 @@ int model_initialize(Data *d, char *msg)
     return 0;
 }
 
-int model_step(Data *d, double t, double h, char *msg)
+/* model_step; with reached (FMI 3 early return) it stops at the first contact switch inside the
+ * step, the switch then done, and says where it stopped (t + h when there was none). */
+static int plant_step(Data *d, double t, double h, double *reached, char *msg)
 {
     static const char *const inputs[3] = {"tau1", "tau2", "tau3"};
     ModelState *m = &d->m;
@@ -445,6 +447,10 @@ int model_step(Data *d, double t, double h, char *msg)
         }
         mode = !mode;
         switches += 1;
+        if (reached) { /* return early, at the switch (FMI 3 co-simulation only) */
+            t_end = t_cur;
+            break;
+        }
         if (switches > MAX_SWITCHES) {
             return fail(msg, "plant integration failed: contact chattering: more than %d switches"
                              " in a step", MAX_SWITCHES);
@@ -461,7 +467,20 @@ int model_step(Data *d, double t, double h, char *msg)
         return 1;
     }
     write_outputs(d);
+    if (reached) {
+        *reached = t_end;
+    }
     return 0;
+}
+
+int model_step(Data *d, double t, double h, char *msg)
+{
+    return plant_step(d, t, h, NULL, msg);
+}
+
+int model_step_early(Data *d, double t, double h, double *reached, char *msg)
+{
+    return plant_step(d, t, h, reached, msg);
 }
 
 int model_check_state(const Data *d, char *msg)

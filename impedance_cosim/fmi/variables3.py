@@ -1,0 +1,288 @@
+"""The FMI 3.0 modelDescription.xml of a model, written from the same variable table as the FMI 2.0
+one (impedance_cosim.fmi.variables): same names, value references, units, ranges and
+descriptions, FMI 3 type names (Float64, Int32, Boolean, String), an `independent` time variable
+and, past the table, what only FMI 3 declares: the event indicators as Float64 locals and the
+controller's sample clock (a periodic time-based Clock whose interval is a parameter)."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+from impedance_cosim import __version__
+from impedance_cosim.fmi import variables as _fmi2
+from impedance_cosim.fmi.variables import (
+    AUTHOR,
+    COPYRIGHT,
+    LICENSE,
+    LOG_CATEGORIES,
+    UNITS,
+    ModelExchange,
+    Variable,
+    _fmt,
+    derivative_variables,
+)
+
+FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+# What the FMI 2.0 writer declares beyond units, where the tables define it (issue 12: quantities,
+# display units, enumerations, sampled-data dependencies); absent, the FMI 3.0 XML goes without.
+QUANTITIES: dict[str, str] = getattr(_fmi2, "QUANTITIES", {})
+DISPLAY_UNITS: dict[str, tuple[str, float, float]] = getattr(_fmi2, "DISPLAY_UNITS", {})
+SAMPLED_INPUTS = getattr(_fmi2, "SAMPLED_INPUTS", object())
+
+
+@dataclass(frozen=True)
+class SampleClock:
+    """A periodic time-based input clock ticking every `period_parameter` seconds from the start
+    (Scheduled Execution: the importer activates the model partition at every tick)."""
+
+    name: str
+    period_parameter: str
+    description: str
+
+
+@dataclass(frozen=True)
+class Extras:
+    """Value references of the FMI 3-only variables, numbered after the table (which keeps the
+    FMI 2.0 value references): time first, then event indicators or the clock."""
+
+    time: int
+    indicators: tuple[int, ...]
+    clock: int | None
+
+
+def extras(n_table: int, model_exchange: ModelExchange | None, clock: SampleClock | None) -> Extras:
+    """Where time, the event indicators and the clock sit for a table of n_table variables."""
+    n_ind = model_exchange.event_indicators if model_exchange else 0
+    indicators = tuple(range(n_table + 1, n_table + 1 + n_ind))
+    return Extras(n_table, indicators, n_table + 1 + n_ind if clock else None)
+
+
+def full_table(variables: list[Variable], model_exchange: ModelExchange | None) -> list[Variable]:
+    """The table as both glues number it: the model's variables, then der(<state>) locals."""
+    if model_exchange:
+        return [*variables, *derivative_variables(variables, model_exchange)]
+    return list(variables)
+
+
+def model_description3(
+    model_name: str,
+    description: str,
+    token: str,
+    variables: list[Variable],
+    default_experiment: dict[str, float],
+    generation_tool: str,
+    output_dependencies: str | None = None,
+    model_exchange: ModelExchange | None = None,
+    clock: SampleClock | None = None,
+    early_return: bool = False,
+) -> bytes:
+    """Complete FMI 3.0 modelDescription.xml: Co-Simulation (without event mode) and, with
+    model_exchange, Model Exchange; with clock, Scheduled Execution instead of both, the model's
+    inputs and outputs then clocked by it. output_dependencies as in the FMI 2.0 writer;
+    early_return: fmi3DoStep may return early (at the plant's contact) if the importer allows."""
+    table = full_table(variables, model_exchange)
+    ext = extras(len(table), model_exchange, clock)
+    vr_of = {v.name: vr for vr, v in enumerate(table)}
+    root = ET.Element(
+        "fmiModelDescription",
+        {
+            "fmiVersion": "3.0",
+            "modelName": model_name,
+            "instantiationToken": token,
+            "description": description,
+            "author": AUTHOR,
+            "version": __version__,
+            "copyright": COPYRIGHT,
+            "license": LICENSE,
+            "generationTool": generation_tool,
+            "variableNamingConvention": "flat",
+        },
+    )
+    common = {
+        "modelIdentifier": model_name,
+        "needsExecutionTool": "false",
+        "canBeInstantiatedOnlyOncePerProcess": "false",
+        "canGetAndSetFMUState": "true",
+        "canSerializeFMUState": "true",
+    }
+    if clock:
+        ET.SubElement(root, "ScheduledExecution", common)
+    else:
+        if model_exchange:
+            ET.SubElement(
+                root, "ModelExchange", {**common, "needsCompletedIntegratorStep": "false"}
+            )
+        ET.SubElement(
+            root,
+            "CoSimulation",
+            {
+                **common,
+                "canHandleVariableCommunicationStepSize": "true",
+                "hasEventMode": "false",
+                "mightReturnEarlyFromDoStep": _fmt(early_return),
+                "providesIntermediateUpdate": "false",
+                "canReturnEarlyAfterIntermediateUpdate": "false",
+            },
+        )
+    used = sorted({v.unit for v in table if v.unit} | {"s"})
+    unknown = [u for u in used if u not in UNITS]
+    if unknown:
+        raise ValueError(f"units {unknown} are not defined in UNITS")
+    units = ET.SubElement(root, "UnitDefinitions")
+    for u in used:
+        unit = ET.SubElement(units, "Unit", {"name": u})
+        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
+        if u in DISPLAY_UNITS:
+            name, factor, offset = DISPLAY_UNITS[u]
+            ET.SubElement(
+                unit, "DisplayUnit", {"name": name, "factor": repr(factor), "offset": repr(offset)}
+            )
+    _type_definitions(root, [u for u in used if u in QUANTITIES], table)
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
+    ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
+    mv = ET.SubElement(root, "ModelVariables")
+    ET.SubElement(
+        mv,
+        "Float64",
+        {
+            "name": "time",
+            "valueReference": str(ext.time),
+            "description": "Simulation time",
+            "causality": "independent",
+            "variability": "continuous",
+            "unit": "s",
+        },
+    )
+    clocked = {"clocks": str(ext.clock)} if clock else {}
+    for vr, v in enumerate(table):
+        attrs = {
+            "name": v.name,
+            "valueReference": str(vr),
+            "description": v.description,
+            "causality": v.causality,
+            "variability": v.fmi_variability,
+        }
+        if clock and v.causality in ("input", "output"):
+            attrs.update(clocked, variability="discrete")
+        if v.causality in ("output", "local"):
+            attrs["initial"] = "calculated"
+        if v.derivative:
+            attrs["derivative"] = str(vr_of[v.derivative])
+        enumeration = getattr(v, "enumeration", None)
+        if enumeration:  # an Int32 of the enumeration's declared type (as in FMI 2.0)
+            attrs.update(declaredType=enumeration.name, min="1", max=str(len(enumeration.items)))
+        if v.unit and v.type == "Real":
+            if v.unit in QUANTITIES:
+                attrs["declaredType"] = QUANTITIES[v.unit]
+            attrs["unit"] = v.unit
+            if v.unit in DISPLAY_UNITS:
+                attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
+        if v.min is not None:
+            attrs["min"] = _fmt(v.min)
+        if v.max is not None:
+            attrs["max"] = _fmt(v.max)
+        start = v.causality not in ("output", "local")
+        if start and v.type != "String":
+            attrs["start"] = _fmt(v.start)
+        element = ET.SubElement(mv, FMI3_TYPES[v.type], attrs)
+        if start and v.type == "String":
+            ET.SubElement(element, "Start", {"value": str(v.start)})
+    for i, vr in enumerate(ext.indicators):
+        ET.SubElement(
+            mv,
+            "Float64",
+            {
+                "name": f"event_indicator{i + 1}",
+                "valueReference": str(vr),
+                "description": "Contact switching function (Model Exchange event indicator)",
+                "causality": "local",
+                "variability": "continuous",
+                "initial": "calculated",
+            },
+        )
+    if clock:
+        ET.SubElement(
+            mv,
+            "Clock",
+            {
+                "name": clock.name,
+                "valueReference": str(ext.clock),
+                "description": clock.description,
+                "causality": "input",
+                "variability": "discrete",
+                "intervalVariability": "fixed",
+                "priority": "0",
+            },
+        )
+    ms = ET.SubElement(root, "ModelStructure")
+    states = model_exchange.states if model_exchange else ()
+    if output_dependencies == "" and states and not clock:
+        output_dependencies = " ".join(str(vr_of[s]) for s in states)
+    if output_dependencies is SAMPLED_INPUTS or output_dependencies == SAMPLED_INPUTS:
+        inputs = [str(vr) for vr, v in enumerate(table) if v.causality == "input"]
+        dep = {"dependencies": " ".join(inputs),
+               "dependenciesKind": " ".join(["discrete"] * len(inputs))}  # fmt: skip
+    else:
+        dep = {} if output_dependencies is None else {"dependencies": output_dependencies}
+    for vr, v in enumerate(table):
+        if v.causality == "output":
+            ET.SubElement(ms, "Output", {"valueReference": str(vr), **dep})
+    if not clock:
+        for vr, v in enumerate(table):
+            if v.derivative:
+                ET.SubElement(ms, "ContinuousStateDerivative", {"valueReference": str(vr)})
+    for vr, v in enumerate(table):  # clocked outputs are not initial unknowns
+        if not clock and (v.causality == "output" or v.derivative):
+            ET.SubElement(ms, "InitialUnknown", {"valueReference": str(vr)})
+    if not clock:
+        for vr in ext.indicators:
+            ET.SubElement(ms, "EventIndicator", {"valueReference": str(vr)})
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _type_definitions(root: ET.Element, units: list[str], table: list[Variable]) -> None:
+    """TypeDefinitions as the FMI 2.0 writer has them: a Float64Type per unit (its quantity and
+    display unit), an Int32Type per enumeration (its values listed in the description)."""
+    enums = {}
+    for v in table:
+        e = getattr(v, "enumeration", None)
+        if e:
+            enums[e.name] = e
+    if not units and not enums:
+        return
+    types = ET.SubElement(root, "TypeDefinitions")
+    for u in units:
+        attrs = {"name": QUANTITIES[u], "quantity": QUANTITIES[u], "unit": u}
+        if u in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[u][0]
+        ET.SubElement(types, "Float64Type", attrs)
+    for e in enums.values():
+        text = f"{e.description}: {e.choices()}"
+        attrs = {"name": e.name, "description": text, "min": "1", "max": str(len(e.items))}
+        ET.SubElement(types, "Int32Type", attrs)
+
+
+def c_config3(n_table: int, model_exchange: ModelExchange | None, clock: SampleClock | None,
+              variables: list[Variable], early_return: bool = False) -> str:  # fmt: skip
+    """fmi3_config.h for the FMI 3 glue: the value references of the FMI 3-only variables."""
+    ext = extras(n_table, model_exchange, clock)
+    lines = [
+        "/* Written by impedance_cosim's FMI 3 build (variables3.c_config3): do not edit. */",
+        f"#define VR_TIME {ext.time}",
+        f"#define VR_INDICATOR {ext.indicators[0] if ext.indicators else n_table + 1}",
+        f"#define HAS_CLOCK {1 if clock else 0}",
+        f"#define HAS_EARLY_RETURN {1 if early_return else 0}",
+    ]
+    if clock:
+        names = [v.name for v in variables]
+        if clock.period_parameter not in names:
+            raise ValueError(f"clock period parameter {clock.period_parameter!r} is not a variable")
+        lines += [
+            f"#define VR_CLOCK {ext.clock}",
+            f"#define CLOCK_PERIOD_VR {names.index(clock.period_parameter)}",
+        ]
+    return "\n".join(lines) + "\n"

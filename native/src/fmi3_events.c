@@ -1,0 +1,284 @@
+/* The FMI 3.0 Model Exchange functions and the sample clock of Scheduled Execution (see
+ * fmi3_glue.c): calls of the FMI 2.0 Model Exchange layer (fmi2_me.c). A clock tick is an event of
+ * the model's Model Exchange side at the tick's time: the samples due are taken. */
+#include <math.h>
+#include <stddef.h>
+
+#include "fmi3_wrapper.h"
+
+/* --- clocks (Scheduled Execution) ------------------------------------------------------------- */
+
+/* The clock's value reference is VR_CLOCK: 1 if every reference is it, else 0 after logging. */
+static int clocks_only(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, const void *out,
+                       const char *function)
+{
+    if (nvr > 0 && (!vr || !out)) {
+        log_message(w->inner, fmi2Error, "logStatusError", "%s: NULL array", function);
+        return 0;
+    }
+    for (size_t k = 0; k < nvr; k++) {
+#if HAS_CLOCK
+        if (vr[k] == VR_CLOCK) {
+            continue;
+        }
+#endif
+        log_message(w->inner, fmi2Error, "logStatusError", "%s: %u is not a clock of this FMU",
+                    function, (unsigned)vr[k]);
+        return 0;
+    }
+    return 1;
+}
+
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
+                                  const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, fmi3Float64 intervals[],
+                                  fmi3IntervalQualifier qualifiers[])
+{
+    WRAP("fmi3GetIntervalDecimal");
+    if (!clocks_only(w, valueReferences, nValueReferences, intervals, "fmi3GetIntervalDecimal") ||
+        (nValueReferences > 0 && !qualifiers)) {
+        return fmi3Error;
+    }
+    if (nValueReferences > 0 && w->inner->s.phase == S_INSTANTIATED) {
+        return FAIL(w, "fmi3GetIntervalDecimal: the interval is known from initialization mode "
+                       "on (it is the parameter sample_period)");
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+#if HAS_CLOCK
+        intervals[k] = w->inner->s.d.r[CLOCK_PERIOD_VR];
+#endif
+        qualifiers[k] = fmi3IntervalChanged;
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                               size_t nValueReferences, fmi3Float64 shifts[])
+{
+    WRAP("fmi3GetShiftDecimal");
+    if (!clocks_only(w, valueReferences, nValueReferences, shifts, "fmi3GetShiftDecimal")) {
+        return fmi3Error;
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        shifts[k] = 0.0; /* the first tick is at the start time */
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
+                                   const fmi3ValueReference valueReferences[],
+                                   size_t nValueReferences, fmi3UInt64 counters[],
+                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
+{
+    WRAP("fmi3GetIntervalFraction");
+    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions,
+        (void)qualifiers;
+    return FAIL(w, "the clock interval is given as a decimal only (supportsFraction=false)");
+}
+
+fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, fmi3UInt64 counters[],
+                                fmi3UInt64 resolutions[])
+{
+    WRAP("fmi3GetShiftFraction");
+    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
+    return FAIL(w, "the clock shift is given as a decimal only (supportsFraction=false)");
+}
+
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, const fmi3Float64 intervals[])
+{
+    WRAP("fmi3SetIntervalDecimal");
+    (void)valueReferences, (void)nValueReferences, (void)intervals;
+    return FAIL(w, "the clock interval is fixed by the parameter sample_period");
+}
+
+fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
+                                   const fmi3ValueReference valueReferences[],
+                                   size_t nValueReferences, const fmi3UInt64 counters[],
+                                   const fmi3UInt64 resolutions[])
+{
+    WRAP("fmi3SetIntervalFraction");
+    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
+    return FAIL(w, "the clock interval is fixed by the parameter sample_period");
+}
+
+fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                               size_t nValueReferences, const fmi3Float64 shifts[])
+{
+    WRAP("fmi3SetShiftDecimal");
+    (void)valueReferences, (void)nValueReferences, (void)shifts;
+    return FAIL(w, "the clock has no shift to set");
+}
+
+fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, const fmi3UInt64 counters[],
+                                const fmi3UInt64 resolutions[])
+{
+    WRAP("fmi3SetShiftFraction");
+    (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
+    return FAIL(w, "the clock has no shift to set");
+}
+
+fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
+                                      fmi3Float64 activationTime)
+{
+    fmi2EventInfo ev;
+    fmi2Status s;
+    WRAP("fmi3ActivateModelPartition");
+    if (w->kind != K_SE) {
+        return FAIL(w, "fmi3ActivateModelPartition: this instance is not for Scheduled Execution");
+    }
+    if (!clocks_only(w, &clockReference, 1, &clockReference, "fmi3ActivateModelPartition")) {
+        return fmi3Error;
+    }
+    if (w->inner->s.phase != S_EVENT_MODE) {
+        return FAIL(w, "fmi3ActivateModelPartition called before fmi3ExitInitializationMode or "
+                       "after fmi3Terminate");
+    }
+    if (!isfinite(activationTime) || activationTime < w->inner->s.last_time) {
+        return FAIL(w, "fmi3ActivateModelPartition: activation time %.17g is not finite or "
+                       "before the previous one (%.17g)", activationTime, w->inner->s.last_time);
+    }
+    /* a tick is an event of the Model Exchange side at that time: the samples due are taken */
+    s = fmi2EnterEventMode(w->inner);
+    if (s == fmi2OK) {
+        s = fmi2SetTime(w->inner, activationTime);
+    }
+    if (s == fmi2OK) {
+        s = fmi2NewDiscreteStates(w->inner, &ev);
+    }
+    return status3(s);
+}
+/* --- Model Exchange --------------------------------------------------------------------------- */
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
+                                    fmi3Boolean *terminateSimulation,
+                                    fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged,
+                                    fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
+{
+    fmi2EventInfo ev;
+    fmi2Status s;
+    WRAP("fmi3UpdateDiscreteStates");
+    if (w->kind != K_ME) {
+        return FAIL(w, "fmi3UpdateDiscreteStates: this FMU has event mode under Model "
+                       "Exchange only");
+    }
+    s = fmi2NewDiscreteStates(w->inner, &ev);
+    if (s != fmi2OK) {
+        return status3(s);
+    }
+    /* every output argument may be NULL (FMI 3.0, section 3.2.2: then it is not needed) */
+    if (discreteStatesNeedUpdate) {
+        *discreteStatesNeedUpdate = ev.newDiscreteStatesNeeded != fmi2False;
+    }
+    if (terminateSimulation) {
+        *terminateSimulation = ev.terminateSimulation != fmi2False;
+    }
+    if (nominalsOfContinuousStatesChanged) {
+        *nominalsOfContinuousStatesChanged = ev.nominalsOfContinuousStatesChanged != fmi2False;
+    }
+    if (valuesOfContinuousStatesChanged) {
+        *valuesOfContinuousStatesChanged = ev.valuesOfContinuousStatesChanged != fmi2False;
+    }
+    if (nextEventTimeDefined) {
+        *nextEventTimeDefined = ev.nextEventTimeDefined != fmi2False;
+    }
+    if (nextEventTime) {
+        *nextEventTime = ev.nextEventTime;
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
+{
+    WRAP("fmi3EnterContinuousTimeMode");
+    return status3(fmi2EnterContinuousTimeMode(w->inner));
+}
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
+                                       fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode,
+                                       fmi3Boolean *terminateSimulation)
+{
+    fmi2Boolean enter = fmi2False, stop = fmi2False;
+    fmi2Status s;
+    WRAP("fmi3CompletedIntegratorStep");
+    if (!enterEventMode || !terminateSimulation) {
+        return FAIL(w, "fmi3CompletedIntegratorStep: NULL output argument");
+    }
+    s = fmi2CompletedIntegratorStep(w->inner, noSetFMUStatePriorToCurrentPoint, &enter, &stop);
+    *enterEventMode = enter != fmi2False;
+    *terminateSimulation = stop != fmi2False;
+    return status3(s);
+}
+
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
+{
+    WRAP("fmi3SetTime");
+    return status3(fmi2SetTime(w->inner, time));
+}
+
+fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
+                                   size_t nContinuousStates)
+{
+    WRAP("fmi3SetContinuousStates");
+    return status3(fmi2SetContinuousStates(w->inner, continuousStates, nContinuousStates));
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
+                                             size_t nContinuousStates)
+{
+    WRAP("fmi3GetContinuousStateDerivatives");
+    return status3(fmi2GetDerivatives(w->inner, derivatives, nContinuousStates));
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
+                                  size_t nEventIndicators)
+{
+    WRAP("fmi3GetEventIndicators");
+    return status3(fmi2GetEventIndicators(w->inner, eventIndicators, nEventIndicators));
+}
+
+fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
+                                   size_t nContinuousStates)
+{
+    WRAP("fmi3GetContinuousStates");
+    return status3(fmi2GetContinuousStates(w->inner, continuousStates, nContinuousStates));
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
+                                             size_t nContinuousStates)
+{
+    WRAP("fmi3GetNominalsOfContinuousStates");
+    return status3(fmi2GetNominalsOfContinuousStates(w->inner, nominals, nContinuousStates));
+}
+
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
+{
+    WRAP("fmi3GetNumberOfEventIndicators");
+    if (!nEventIndicators) {
+        return FAIL(w, "fmi3GetNumberOfEventIndicators: NULL output argument");
+    }
+#ifdef MODEL_EXCHANGE
+    *nEventIndicators = N_EVENT_INDICATORS;
+#else
+    *nEventIndicators = 0;
+#endif
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates)
+{
+    WRAP("fmi3GetNumberOfContinuousStates");
+    if (!nContinuousStates) {
+        return FAIL(w, "fmi3GetNumberOfContinuousStates: NULL output argument");
+    }
+#ifdef MODEL_EXCHANGE
+    *nContinuousStates = N_STATES;
+#else
+    *nContinuousStates = 0;
+#endif
+    return fmi3OK;
+}

@@ -1,0 +1,612 @@
+/* The FMI 3.0 interface of every native model (Co-Simulation, Model Exchange and, for a model
+ * with a sample clock, Scheduled Execution): a thin layer over the FMI 2.0 implementation.
+ *
+ * This file includes fmi2_glue.c and fmi2_me.c (one translation unit) with their functions
+ * renamed to internal impc_fmi2* names (fmi2_hidden.h), and calls them (so do fmi3_events.c:
+ * Model Exchange and the clock, and fmi3_stubs.c: what is not provided): one state machine, one set of checks (parameters, non-finite inputs, call order,
+ * FMU-state validation) and one FMU-state format for both standards. What FMI 3 adds is here:
+ * the `independent` time variable (value reference VR_TIME, read-only), the nValues argument,
+ * fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra results,
+ * and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an event of
+ * the model's Model Exchange side at that time: the samples due are taken, outputs updated).
+ * Co-Simulation is without event mode (hasEventMode=false): the model samples inside doStep as
+ * under FMI 2.0, so a host without clock support runs it unchanged.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi3Functions.h"
+#include "fmi2_hidden.h" /* before the FMI 2 layer: its functions become internal */
+
+#define model_step model_step_fmi3 /* fmi2DoStep steps through model_step_fmi3 (below) */
+#include "fmi2_glue.c"
+#include "fmi2_me.c"
+#undef model_step
+int model_step(Data *d, double t, double h, char *msg);
+
+#include "fmi3_wrapper.h" /* Wrapper, WRAP, FAIL */
+#if HAS_EARLY_RETURN
+/* model.c: model_step that stops at the first discrete-state switch inside the step */
+int model_step_early(Data *d, double t, double h, double *reached, char *msg);
+#endif
+
+#ifndef MODEL_EXCHANGE
+#error "the FMI 3 layer needs the model's Model Exchange side (config.h: MODEL_EXCHANGE)"
+#endif
+
+/* The model step fmi2DoStep takes: the model's own, or, where early return is on, one that stops
+ * at an event. fmi2DoStep steps the instance's own Data (inst->s.d, never a copy: the early-return
+ * test would fail otherwise), so d leads to the instance and its logger environment, the Wrapper. */
+int model_step_fmi3(Data *d, double t, double h, char *msg)
+{
+    const Instance *inst =
+        (const Instance *)((const char *)d - offsetof(Instance, s) - offsetof(Snapshot, d));
+    Wrapper *w = (Wrapper *)inst->cb.componentEnvironment;
+#if HAS_EARLY_RETURN
+    if (w->early_return && w->inner == inst) {
+        return model_step_early(d, t, h, &w->reached, msg);
+    }
+#endif
+    w->reached = t + h;
+    return model_step(d, t, h, msg);
+}
+
+/* FMI 2 function names in the inner layer's messages, as the FMI 3 host knows them. */
+static const char *const RENAMES[][2] = {
+    {"fmi2NewDiscreteStates", "fmi3UpdateDiscreteStates"},
+    {"fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives"},
+    {"fmi2SetupExperiment", "fmi3EnterInitializationMode"},
+    {"fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"},
+    {"fmi2GetReal", "fmi3GetFloat64"},
+    {"fmi2SetReal", "fmi3SetFloat64"},
+    {"fmi2GetInteger", "fmi3GetInt32"},
+    {"fmi2SetInteger", "fmi3SetInt32"},
+    {"FMUstate", "FMUState"},
+    {"fmi2", "fmi3"},
+    {"of type Real", "of type Float64"},
+    {"of type Integer", "of type Int32"},
+};
+
+/* The inner layer's logger: passes the message on to the FMI 3 callback (which is not
+ * printf-style, so the inner layer's doubled '%' is undone) with FMI 3 function names. */
+static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
+                  fmi2String category, fmi2String message, ...)
+{
+    const Wrapper *w = (const Wrapper *)env;
+    char text[2 * (MSG_MAX + 64)];
+    size_t k = 0;
+    (void)name;
+    if (!w || !w->log || !message) {
+        return;
+    }
+    for (const char *p = message; *p && k + 1 < sizeof text;) {
+        size_t r, n = sizeof RENAMES / sizeof RENAMES[0];
+        for (r = 0; r < n; r++) {
+            size_t len = strlen(RENAMES[r][0]);
+            if (strncmp(p, RENAMES[r][0], len) == 0) {
+                size_t add = strlen(RENAMES[r][1]);
+                if (k + add + 1 < sizeof text) {
+                    memcpy(text + k, RENAMES[r][1], add);
+                    k += add;
+                }
+                p += len;
+                break;
+            }
+        }
+        if (r < n) {
+            continue;
+        }
+        if (p[0] == '%' && p[1] == '%') {
+            p++;
+        }
+        text[k++] = *p++;
+    }
+    text[k] = '\0';
+    w->log(w->env, status <= fmi2Fatal ? (fmi3Status)status : fmi3Error,
+           category ? category : "logAll", text);
+}
+
+fmi3Status status3(fmi2Status s)
+{
+    return s <= fmi2Fatal ? (fmi3Status)s : fmi3Error;
+}
+
+/* The wrapper, if instance is a live FMI 3 instance of this FMU (else NULL, said on stderr:
+ * the host's logger lives in the instance and cannot be trusted then). */
+Wrapper *wrapper_of(fmi3Instance instance, const char *function)
+{
+    Wrapper *w = (Wrapper *)instance;
+    if (!w) {
+        return NULL;
+    }
+    if (w->magic != WRAPPER_MAGIC) {
+        fprintf(stderr, "%s: %s called on an instance that is not a live %s instance\n",
+                MODEL_IDENTIFIER_STR, function, MODEL_IDENTIFIER_STR);
+        return NULL;
+    }
+    return w;
+}
+
+
+static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Boolean visible,
+                            fmi3Boolean logging_on, fmi3InstanceEnvironment env,
+                            fmi3LogMessageCallback log)
+{
+    fmi2CallbackFunctions cb;
+    Wrapper *w = (Wrapper *)calloc(1, sizeof(Wrapper));
+    if (!w) {
+        if (log) {
+            log(env, fmi3Error, "logStatusError", "out of memory");
+        }
+        return NULL;
+    }
+    w->magic = WRAPPER_MAGIC;
+    w->kind = kind;
+    w->env = env;
+    w->log = log;
+    cb.logger = relay;
+    cb.allocateMemory = calloc;
+    cb.freeMemory = free;
+    cb.stepFinished = NULL;
+    cb.componentEnvironment = w;
+    w->inner = (Instance *)fmi2Instantiate(name, kind == K_CS ? fmi2CoSimulation : fmi2ModelExchange,
+                                           token, NULL, &cb, visible ? fmi2True : fmi2False,
+                                           logging_on ? fmi2True : fmi2False);
+    if (!w->inner) {
+        free(w);
+        return NULL;
+    }
+    return w;
+}
+
+/* --- common functions ----------------------------------------------------------------------- */
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                               const fmi3String categories[])
+{
+    WRAP("fmi3SetDebugLogging");
+    return status3(fmi2SetDebugLogging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
+                                  categories));
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible,
+                                          fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage)
+{
+    (void)resourcePath;
+    return instantiate(K_ME, instanceName, instantiationToken, visible, loggingOn,
+                       instanceEnvironment, logMessage);
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
+    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
+    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
+    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    Wrapper *w;
+    (void)resourcePath, (void)requiredIntermediateVariables, (void)intermediateUpdate;
+    if (eventModeUsed || nRequiredIntermediateVariables > 0) {
+        if (logMessage) {
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       eventModeUsed ? MODEL_IDENTIFIER_STR " has no event mode in co-simulation "
+                                                            "(hasEventMode=false)"
+                                     : MODEL_IDENTIFIER_STR " provides no intermediate update");
+        }
+        return NULL;
+    }
+    w = instantiate(K_CS, instanceName, instantiationToken, visible, loggingOn,
+                    instanceEnvironment, logMessage);
+    if (w) {
+        w->early_return = HAS_EARLY_RETURN && earlyReturnAllowed;
+    }
+    return w;
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
+    fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+    fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption)
+{
+    (void)resourcePath, (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+#if HAS_CLOCK && defined(MODEL_EXCHANGE)
+    return instantiate(K_SE, instanceName, instantiationToken, visible, loggingOn,
+                       instanceEnvironment, logMessage);
+#else
+    (void)instanceName, (void)instantiationToken, (void)visible, (void)loggingOn;
+    if (logMessage) {
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   MODEL_IDENTIFIER_STR " (this FMU) has no Scheduled Execution interface");
+    }
+    return NULL;
+#endif
+}
+
+void fmi3FreeInstance(fmi3Instance instance)
+{
+    Wrapper *w = wrapper_of(instance, "fmi3FreeInstance");
+    if (!w) {
+        return;
+    }
+    fmi2FreeInstance(w->inner);
+    *(volatile unsigned *)&w->magic = 0; /* volatile: the store must survive free() */
+    free(w);
+}
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
+                                       fmi3Float64 tolerance, fmi3Float64 startTime,
+                                       fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
+{
+    fmi2Status s;
+    WRAP("fmi3EnterInitializationMode");
+    if (w->inner->s.phase != S_INSTANTIATED) {
+        return FAIL(w, "fmi3EnterInitializationMode called twice or after initialization");
+    }
+    s = fmi2SetupExperiment(w->inner, toleranceDefined ? fmi2True : fmi2False, tolerance,
+                            startTime, stopTimeDefined ? fmi2True : fmi2False, stopTime);
+    if (s != fmi2OK) {
+        return status3(s);
+    }
+    return status3(fmi2EnterInitializationMode(w->inner));
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
+{
+    WRAP("fmi3ExitInitializationMode");
+    return status3(fmi2ExitInitializationMode(w->inner));
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance instance)
+{
+    WRAP("fmi3EnterEventMode");
+    if (w->kind != K_ME) {
+        return FAIL(w, "fmi3EnterEventMode: this FMU has event mode under Model Exchange only");
+    }
+    return status3(fmi2EnterEventMode(w->inner));
+}
+
+fmi3Status fmi3Terminate(fmi3Instance instance)
+{
+    WRAP("fmi3Terminate");
+    return status3(fmi2Terminate(w->inner));
+}
+
+fmi3Status fmi3Reset(fmi3Instance instance)
+{
+    WRAP("fmi3Reset");
+    return status3(fmi2Reset(w->inner));
+}
+/* --- getters and setters ---------------------------------------------------------------------- */
+
+/* Every variable is a scalar: nValues must equal nValueReferences; arrays may be NULL only when
+ * empty. 1 if the call is well formed, else 0 after logging why. */
+static int well_formed(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, const void *values,
+                       size_t nValues, const char *function)
+{
+    if (nValues != nvr) {
+        log_message(w->inner, fmi2Error, "logStatusError",
+                    "%s: %lu values for %lu value references (every variable is a scalar)",
+                    function, (unsigned long)nValues, (unsigned long)nvr);
+        return 0;
+    }
+    if (nvr > 0 && (!vr || !values)) {
+        log_message(w->inner, fmi2Error, "logStatusError", "%s: NULL array", function);
+        return 0;
+    }
+    return 1;
+}
+
+/* Value references past the FMI 2 table: time (VR_TIME), then the event indicators (Float64
+ * locals from VR_INDICATOR on) or the clock (VR_CLOCK). */
+static int mentions_extra(const fmi3ValueReference vr[], size_t nvr)
+{
+    for (size_t k = 0; k < nvr; k++) {
+        if (vr[k] >= N_VARS) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* An FMI 3 Float64 past the FMI 2 table (1 with the value, or 0 if vr is none of them). */
+static fmi3Status get_extra(Wrapper *w, fmi3ValueReference vr, double *value)
+{
+    if (vr == VR_TIME) {
+        *value = w->inner->s.last_time; /* start time, the last step's end, or fmi3SetTime */
+        return fmi3OK;
+    }
+#if N_EVENT_INDICATORS > 0
+    if (vr >= VR_INDICATOR && vr < VR_INDICATOR + N_EVENT_INDICATORS) {
+        double z[N_EVENT_INDICATORS];
+        if (w->inner->s.phase == S_INSTANTIATED) {
+            return FAIL(w, "values can be read only from initialization mode on");
+        }
+        if (model_me_event_indicators(&w->inner->s.d, z, w->inner->msg)) {
+            return FAIL(w, "%s", w->inner->msg);
+        }
+        *value = z[vr - VR_INDICATOR];
+        return fmi3OK;
+    }
+#endif
+    return FAIL(w, "value reference %u is not a Float64 variable of this FMU", (unsigned)vr);
+}
+
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, fmi3Float64 values[], size_t nValues)
+{
+    WRAP("fmi3GetFloat64");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetFloat64")) {
+        return fmi3Error;
+    }
+    if (!mentions_extra(valueReferences, nValueReferences)) {
+        return status3(fmi2GetReal(w->inner, (const fmi2ValueReference *)valueReferences,
+                              nValueReferences, values));
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        fmi3Status s;
+        if (valueReferences[k] >= N_VARS) {
+            s = get_extra(w, valueReferences[k], &values[k]);
+        } else {
+            s = status3(fmi2GetReal(w->inner, (const fmi2ValueReference *)&valueReferences[k], 1,
+                               &values[k]));
+        }
+        if (s != fmi3OK) {
+            return s;
+        }
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
+{
+    WRAP("fmi3SetFloat64");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetFloat64")) {
+        return fmi3Error;
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        if (valueReferences[k] == VR_TIME) {
+            return FAIL(w, "time is the independent variable: it cannot be set (fmi3SetTime "
+                           "does that under Model Exchange)");
+        }
+        if (valueReferences[k] >= N_VARS) {
+            return FAIL(w, "variable %u is computed by the model: it cannot be set",
+                        (unsigned)valueReferences[k]);
+        }
+    }
+    return status3(fmi2SetReal(w->inner, (const fmi2ValueReference *)valueReferences,
+                          nValueReferences, values));
+}
+
+fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Int32 values[], size_t nValues)
+{
+    WRAP("fmi3GetInt32");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt32")) {
+        return fmi3Error;
+    }
+    return status3(fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
+                             nValueReferences, (fmi2Integer *)values));
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Int32 values[], size_t nValues)
+{
+    WRAP("fmi3SetInt32");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt32")) {
+        return fmi3Error;
+    }
+    return status3(fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
+                             nValueReferences, (const fmi2Integer *)values));
+}
+
+/* Enumerations are read and written as Int64 in FMI 3.0; the model stores them as integers. */
+fmi3Status fmi3GetInt64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Int64 values[], size_t nValues)
+{
+    fmi2Integer buf[64];
+    WRAP("fmi3GetInt64");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt64")) {
+        return fmi3Error;
+    }
+    for (size_t k = 0; k < nValueReferences; k += 64) {
+        size_t n = nValueReferences - k < 64 ? nValueReferences - k : 64;
+        fmi2Status s = fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences + k,
+                                      n, buf);
+        if (s != fmi2OK) {
+            return status3(s);
+        }
+        for (size_t j = 0; j < n; j++) {
+            values[k + j] = buf[j];
+        }
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetInt64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Int64 values[], size_t nValues)
+{
+    fmi2Integer *buf;
+    fmi2Status s;
+    WRAP("fmi3SetInt64");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt64")) {
+        return fmi3Error;
+    }
+    if (nValueReferences == 0) {
+        return fmi3OK;
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        if (values[k] < -2147483647 - 1 || values[k] > 2147483647) {
+            return FAIL(w, "fmi3SetInt64: value %lld is beyond the 32-bit range of this FMU",
+                        (long long)values[k]);
+        }
+    }
+    buf = (fmi2Integer *)malloc(nValueReferences * sizeof *buf);
+    if (!buf) {
+        return FAIL(w, "out of memory");
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        buf[k] = (fmi2Integer)values[k];
+    }
+    s = fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
+                       buf);
+    free(buf);
+    return status3(s);
+}
+
+fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, fmi3Boolean values[], size_t nValues)
+{
+    fmi2Boolean buf[64];
+    WRAP("fmi3GetBoolean");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetBoolean")) {
+        return fmi3Error;
+    }
+    for (size_t k = 0; k < nValueReferences; k += 64) {
+        size_t n = nValueReferences - k < 64 ? nValueReferences - k : 64;
+        fmi2Status s = fmi2GetBoolean(w->inner, (const fmi2ValueReference *)valueReferences + k,
+                                      n, buf);
+        if (s != fmi2OK) {
+            return status3(s);
+        }
+        for (size_t j = 0; j < n; j++) {
+            values[k + j] = buf[j] != fmi2False;
+        }
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, const fmi3Boolean values[], size_t nValues)
+{
+    fmi2Boolean *buf;
+    fmi2Status s;
+    WRAP("fmi3SetBoolean");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetBoolean")) {
+        return fmi3Error;
+    }
+    if (nValueReferences == 0) {
+        return fmi3OK;
+    }
+    buf = (fmi2Boolean *)malloc(nValueReferences * sizeof *buf);
+    if (!buf) {
+        return FAIL(w, "out of memory");
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        buf[k] = values[k] ? fmi2True : fmi2False;
+    }
+    s = fmi2SetBoolean(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
+                       buf);
+    free(buf);
+    return status3(s);
+}
+
+fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                         size_t nValueReferences, fmi3String values[], size_t nValues)
+{
+    WRAP("fmi3GetString");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetString")) {
+        return fmi3Error;
+    }
+    return status3(fmi2GetString(w->inner, (const fmi2ValueReference *)valueReferences,
+                            nValueReferences, values));
+}
+
+fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                         size_t nValueReferences, const fmi3String values[], size_t nValues)
+{
+    WRAP("fmi3SetString");
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetString")) {
+        return fmi3Error;
+    }
+    return status3(fmi2SetString(w->inner, (const fmi2ValueReference *)valueReferences,
+                            nValueReferences, values));
+}
+
+/* Types this FMU has no variables of: an empty call is fine, anything else names the type. *//* --- FMU state: the FMI 2 layer's (validated on set and deserialization) ----------------------- */
+
+fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
+{
+    WRAP("fmi3GetFMUState");
+    return status3(fmi2GetFMUstate(w->inner, FMUState));
+}
+
+fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
+{
+    WRAP("fmi3SetFMUState");
+    return status3(fmi2SetFMUstate(w->inner, FMUState));
+}
+
+fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
+{
+    WRAP("fmi3FreeFMUState");
+    return status3(fmi2FreeFMUstate(w->inner, FMUState));
+}
+
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
+{
+    WRAP("fmi3SerializedFMUStateSize");
+    return status3(fmi2SerializedFMUstateSize(w->inner, FMUState, size));
+}
+
+fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
+                                 fmi3Byte serializedState[], size_t size)
+{
+    WRAP("fmi3SerializeFMUState");
+    return status3(fmi2SerializeFMUstate(w->inner, FMUState, (fmi2Byte *)serializedState, size));
+}
+
+fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
+                                   size_t size, fmi3FMUState *FMUState)
+{
+    WRAP("fmi3DeserializeFMUState");
+    return status3(fmi2DeSerializeFMUstate(w->inner, (const fmi2Byte *)serializedState, size,
+                                      FMUState));
+}
+/* --- Co-Simulation ---------------------------------------------------------------------------- */
+
+fmi3Status fmi3EnterStepMode(fmi3Instance instance)
+{
+    WRAP("fmi3EnterStepMode");
+    return FAIL(w, "fmi3EnterStepMode: this FMU has no event mode in co-simulation");
+}
+
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
+                      fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                      fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
+                      fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
+{
+    fmi2Status s;
+    WRAP("fmi3DoStep");
+    if (w->kind != K_CS) {
+        return FAIL(w, "fmi3DoStep: this instance is not for co-simulation");
+    }
+    if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime) {
+        return FAIL(w, "fmi3DoStep: NULL output argument");
+    }
+    w->reached = currentCommunicationPoint + communicationStepSize;
+    s = fmi2DoStep(w->inner, currentCommunicationPoint, communicationStepSize,
+                   noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
+    *eventHandlingNeeded = fmi3False;
+    *terminateSimulation = fmi3False;
+    *earlyReturn = fmi3False;
+    if (s == fmi2OK && w->reached < currentCommunicationPoint + communicationStepSize) {
+        /* returned early at a discrete-state switch (the plant's wall contact) */
+        w->inner->s.last_time = w->reached;
+        *earlyReturn = fmi3True;
+        log_message(w->inner, fmi2OK, "logAll", "fmi3DoStep returns early at t=%.17g",
+                    w->reached);
+    }
+    *lastSuccessfulTime = w->inner->s.last_time;
+    return status3(s);
+}

@@ -46,6 +46,7 @@ TWO_PI = 2.0 * math.pi
 SINGULAR_TOL = 1e-6  # |det J| below SINGULAR_TOL * a1 * a2 (i.e. |sin q2| < 1e-6) is singular
 TIME_TOL = 1e-9  # sample-time comparisons, relative to the sample period
 VELOCITY_SOURCES = ("observer", "difference", "measured")
+OBSERVER_DISCRETIZATIONS = ("euler", "implicit", "exponential")
 VELOCITY_SOURCE = Enumeration(
     "VelocitySource",
     "Joint velocity fed to the impedance law",
@@ -124,6 +125,13 @@ class ControllerParams:
         " difference of the measured angles) or 3 measured (inputs qd_meas1..3)",
         enumeration=VELOCITY_SOURCE,
     )
+    observer_discretization: str = _p(
+        "euler",
+        "",
+        "Observer update: euler (eq. 9 as printed, explicit; in the paper's loop at 400 Hz"
+        " stable for K Ts <= 0.91), implicit (the -K yhat term implicit) or exponential (-K yhat"
+        " integrated exactly over the sample; both stable for every K > 0)",
+    )
     yhat0_1: float = _p(0.0, "rad/s", "Observer start value yhat(0), joint 1")
     yhat0_2: float = _p(0.0, "rad/s", "Observer start value yhat(0), joint 2")
     yhat0_3: float = _p(0.0, "rad/s", "Observer start value yhat(0), joint 3")
@@ -156,6 +164,11 @@ class ControllerParams:
             VELOCITY_SOURCE.item(self.velocity_source)
         except ValueError as exc:
             raise ValueError(f"parameter velocity_source {exc}") from None
+        if self.observer_discretization not in OBSERVER_DISCRETIZATIONS:
+            raise ValueError(
+                "parameter observer_discretization must be one of"
+                f" {', '.join(OBSERVER_DISCRETIZATIONS)} (got {self.observer_discretization!r})"
+            )
 
 
 def _source_by_value(parameters: dict[str, Any]) -> dict[str, Any]:
@@ -201,12 +214,20 @@ def observer_update(
     f_prev: Vec3,
     K: Vec3,
     dt: float,
+    discretization: str = "euler",
 ) -> Vec3:
     """One step of the discrete velocity observer, eq. (9): yhat_i from yhat_i-1 and q_i-1, q_i.
 
     yhat_i = yhat_i-1 + K (q_i - q_i-1) - dt K yhat_i-1
              + dt H^-1(q_i-1) [tau_i-1 - C(q_i-1, yhat_i-1) yhat_i-1 - F yhat_i-1 - g(q_i-1)
                                - J^T(q_i-1) F_au,i-1]
+
+    That is explicit Euler of yhat' = K (qdot - yhat) + acc, stable only for K dt < 2.
+    discretization = implicit takes the -K yhat term at yhat_i:
+    yhat_i = (yhat_i-1 + K (q_i - q_i-1) + dt acc) / (1 + dt K); exponential integrates it
+    exactly with qdot = (q_i - q_i-1) / dt and acc held over the sample:
+    yhat_i = a yhat_i-1 + (1 - a) ((q_i - q_i-1) / dt + acc / K), a = exp(-K dt).
+    Both keep |yhat's own pole| < 1 for every K > 0, and equal eq. (9) to first order in K dt.
     """
     # The bracket is evaluated at the previous sample: explicit Euler of the integral in eq. (7)
     # over [t - dt, t]. tau_prev is the torque actually applied (held) over that interval (the
@@ -214,6 +235,16 @@ def observer_update(
     jtf = matTvec(arm.jacobian(q_prev), f_prev)
     net = (tau_prev[0] - jtf[0], tau_prev[1] - jtf[1], tau_prev[2] - jtf[2])
     acc = arm.forward_dynamics(q_prev, yhat_prev, net)  # H^-1 [tau - C y - F y - g - J^T F], (5)
+    if discretization != "euler":
+        out = []
+        for i in range(3):
+            dq = q_now[i] - q_prev[i]
+            if discretization == "implicit":
+                out.append((yhat_prev[i] + K[i] * dq + dt * acc[i]) / (1.0 + dt * K[i]))
+            else:
+                a = math.exp(-K[i] * dt)
+                out.append(a * yhat_prev[i] + (1.0 - a) * (dq / dt + acc[i] / K[i]))
+        return (out[0], out[1], out[2])
     return (
         yhat_prev[0] + K[0] * (q_now[0] - q_prev[0]) + dt * acc[0] - dt * K[0] * yhat_prev[0],
         yhat_prev[1] + K[1] * (q_now[1] - q_prev[1]) + dt * acc[1] - dt * K[1] * yhat_prev[1],
@@ -430,7 +461,10 @@ class ControllerModel(FmuModel):
         if k == 0:
             yhat = qd_diff = self.yhat0
         else:
-            yhat = observer_update(self.arm, yhat_prev, q_prev, q, tau_prev, f_prev, self.K, ts)
+            yhat = observer_update(
+                self.arm, yhat_prev, q_prev, q, tau_prev, f_prev, self.K, ts,
+                self.ctrl.observer_discretization,
+            )  # fmt: skip
             qd_diff = ((q[0] - q_prev[0]) / ts, (q[1] - q_prev[1]) / ts, (q[2] - q_prev[2]) / ts)
         source = self.source
         qd_hat = yhat if source == "observer" else qd_diff if source == "difference" else qd_meas

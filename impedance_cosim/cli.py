@@ -249,6 +249,9 @@ def main(argv: list[str] | None = None) -> int:
     from impedance_cosim import sweep
 
     sweep.add_parser(sub)
+    from impedance_cosim import stability_study
+
+    stability_study.add_parser(sub)
     from impedance_cosim.hil import add_parsers as add_hil_parsers
 
     add_hil_parsers(sub)

@@ -6,6 +6,7 @@ plant's outputs at t_i, and the plant integrates over [t_i, t_i + h] with that t
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -36,12 +37,7 @@ def run_models(
     after the step that ends there. Jacobi: the plant gets the torque from before the
     controller's step (one step of delay)."""
     p_names, c_names = output_names(PlantModel), output_names(ControllerModel)
-    p_index = {n: i for i, n in enumerate(p_names)}
-    c_index = {n: i for i, n in enumerate(c_names)}
-    c_inputs = [v.name for v in ControllerModel.variables() if v.causality == "input"]
-    feed = [p_index[dict((c, p) for p, c in PLANT_TO_CONTROLLER)[name]] for name in c_inputs]
-    tau_idx = [c_index[c] for c, _ in CONTROLLER_TO_PLANT]
-
+    feed, tau_idx = wiring()
     plant = PlantModel(plant_parameters or {}, 0.0, None)
     p_out = plant.outputs()
     controller = ControllerModel(controller_parameters or {}, 0.0, tuple(p_out[i] for i in feed))
@@ -49,12 +45,36 @@ def run_models(
     rows = np.empty((n + 1, 1 + len(p_names) + len(c_names)))
     rows[0] = (0.0, *p_out, *controller.outputs())
     for i in range(n):
-        t = i * step
-        held = controller.outputs()
-        controller.do_step(t, step, tuple(p_out[j] for j in feed))  # samples at t_i
-        c_out = controller.outputs() if algorithm == "gauss-seidel" else held
-        plant.do_step(t, step, tuple(c_out[j] for j in tau_idx))
-        p_out = plant.outputs()
+        p_out = loop_step(plant, controller, i * step, step, algorithm, p_out)
         rows[i + 1] = ((i + 1) * step, *p_out, *controller.outputs())
     names = ["time", *(f"plant.{n}" for n in p_names), *(f"controller.{n}" for n in c_names)]
     return {name: rows[:, k] for k, name in enumerate(names)}
+
+
+@functools.cache
+def wiring() -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """(plant output index per controller input, controller output index per plant input)."""
+    p_index = {n: i for i, n in enumerate(output_names(PlantModel))}
+    c_index = {n: i for i, n in enumerate(output_names(ControllerModel))}
+    c_inputs = [v.name for v in ControllerModel.variables() if v.causality == "input"]
+    feed = [p_index[dict((c, p) for p, c in PLANT_TO_CONTROLLER)[name]] for name in c_inputs]
+    return tuple(feed), tuple(c_index[c] for c, _ in CONTROLLER_TO_PLANT)
+
+
+def loop_step(
+    plant: PlantModel,
+    controller: ControllerModel,
+    t: float,
+    step: float,
+    algorithm: str,
+    p_out: tuple,
+) -> tuple:
+    """One macro step from t, given the plant's outputs at t; returns its outputs at t + step.
+    Gauss-Seidel: the controller samples at t and its torque drives the plant over the step;
+    Jacobi: the plant gets the torque held from before the controller's step."""
+    feed, tau_idx = wiring()
+    held = controller.outputs()
+    controller.do_step(t, step, tuple(p_out[j] for j in feed))  # samples at t_i
+    c_out = controller.outputs() if algorithm == "gauss-seidel" else held
+    plant.do_step(t, step, tuple(c_out[j] for j in tau_idx))
+    return plant.outputs()

@@ -59,6 +59,12 @@ def dopri5_step(f: Rhs, y: State, h: float, k1: State) -> tuple[State, State, St
     return y_new, err, k7
 
 
+def euler_step(f: Rhs, y: State, h: float) -> State:
+    """One explicit Euler step y + h f(y) (the plant's integrator = euler, a reproduction aid)."""
+    k = f(y)
+    return tuple(y[i] + h * k[i] for i in range(len(y)))
+
+
 def error_norm(y: State, y_new: State, err: State, rtol: float, atol: float) -> float:
     """Max-norm of the local error scaled by atol + rtol * |y| (<= 1 means accept)."""
     worst = 0.0

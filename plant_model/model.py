@@ -4,6 +4,8 @@ Plain numeric code behind the PumaPlant FMU. State: joint angles and velocities,
 mode, the integrator's step-size guess and the sensor-noise generator. Each do_step integrates
 eq. (1) with the torque held constant, using adaptive Dormand-Prince 5(4) and stopping exactly
 where the contact closes or opens, so the result does not depend on the communication step.
+(euler_substeps = n > 0 instead takes n explicit Euler steps per communication step: a
+reproduction aid for the paper's Fig. 4, docs/stability.md, never a default.)
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
 from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
-from impedance_cosim.ode import IntegrationError, integrate
+from impedance_cosim.ode import IntegrationError, euler_step, integrate
 from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
 
 
@@ -28,6 +30,14 @@ class PlantSetup:
     y0: float = _p(0.0, "m", "Initial end-effector y (arm at rest)")
     phi0: float = _p(0.0, "rad", "Initial end-effector orientation (arm at rest)")
     elbow_up: bool = _p(True, "", "Initial elbow: true = above the shoulder-wrist line (q2 < 0)")
+    euler_substeps: int = _p(
+        0,
+        "",
+        "Plant integrator (co-simulation): 0 = adaptive Dormand-Prince 5(4), the default; n > 0 ="
+        " n explicit Euler steps per communication step, no event location (a reproduction aid"
+        " for the paper's Fig. 4, not accurate)",
+        0,
+    )
     q_quant: float = _p(
         0.0,
         "rad",
@@ -54,9 +64,15 @@ class PlantSetup:
     def validate(self) -> None:
         """Raise ValueError naming a bad setting."""
         check_fields(self)
+        if self.euler_substeps > MAX_EULER_SUBSTEPS:
+            raise ValueError(
+                f"parameter euler_substeps must be <= {MAX_EULER_SUBSTEPS}"
+                f" (got {self.euler_substeps})"
+            )
 
 
 INPUTS = ("tau1", "tau2", "tau3")
+MAX_EULER_SUBSTEPS = 1_000_000  # per communication step (euler_substeps)
 H0 = 1e-3  # s, the integrator's first step guess
 
 
@@ -174,6 +190,19 @@ class PlantModel(FmuModel):
 
         return g
 
+    def _euler_steps(
+        self, tau, mode: bool, y: tuple, h: float, n: int, budget: list[int]
+    ) -> tuple[tuple, bool]:
+        """euler_substeps = n: n explicit Euler steps y + (h/n) f(y), each in the contact mode
+        at its start; the mode switches after a step if its switching function turned positive
+        (no event location: a 1990s-style shortcut). Each step is one evaluation of budget."""
+        dt = h / n
+        for _ in range(n):
+            y = euler_step(self._rhs(tau, mode, budget), y, dt)
+            if self._event(mode)(y) > 0.0:
+                mode = not mode
+        return y, mode
+
     def _measure(self, q) -> tuple[float, float, float]:
         """Joint encoders: truth + Gaussian noise, then quantized to the resolution."""
         s = self.setup
@@ -201,7 +230,10 @@ class PlantModel(FmuModel):
         t_cur, mode, hh, switches = t, self.in_contact, self.h, 0
         budget = [self.setup.max_rhs_evaluations]
         try:
-            while True:
+            if self.setup.euler_substeps > 0:
+                n = self.setup.euler_substeps
+                y, mode = self._euler_steps(inputs, mode, y, h, n, budget)
+            while self.setup.euler_substeps == 0:
                 t_cur, y, hh, hit = integrate(
                     self._rhs(inputs, mode, budget), t_cur, y, t_end, hh,
                     self.setup.rtol, self.setup.atol, self._event(mode),

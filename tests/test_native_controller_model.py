@@ -272,6 +272,19 @@ def test_paper_scenario(lib, plant_rows: np.ndarray, source: str) -> None:
     assert py.k_next == n and py.held_input_samples == 0
 
 
+@pytest.mark.parametrize("method", ["implicit", "exponential"])
+@pytest.mark.parametrize("K", [50.0, 2000.0])
+def test_observer_discretizations(lib, plant_rows: np.ndarray, method: str, K: float) -> None:
+    """The other observer updates, bit for bit, with the paper's gain and with K Ts = 5 (far
+    beyond explicit Euler's K Ts < 2): the estimate stays bounded and near the true velocity."""
+    parameters = {"observer_discretization": method, "K1": K, "K2": K, "K3": K}
+    n = len(plant_rows) - 1
+    out_py, out_nat, py, nat = run_both(lib, parameters, plant_rows, TS, n, 1)
+    assert_same(out_py, out_nat, py, nat)
+    qd_obs = out_py[1:, OUTPUTS.index("qd_obs1")]
+    assert np.abs(qd_obs - plant_rows[:-1, 6]).max() < 0.2  # the truth at the same sample
+
+
 def test_finer_master_step(lib, plant_rows: np.ndarray) -> None:
     """h = Ts / 10: a sample every tenth step, inputs held between the plant's rows."""
     n = (len(plant_rows) - 1) * 10
@@ -361,6 +374,9 @@ def model_error(make) -> str:
         {"velocity_source": 4},
         {"velocity_source": -1},
         {"velocity_source": 2**31 - 1},
+        {"observer_discretization": "rk4"},
+        {"observer_discretization": "it's"},
+        {"velocity_source": 0, "observer_discretization": "y"},
     ],
 )
 def test_bad_parameters(lib, parameters: dict) -> None:

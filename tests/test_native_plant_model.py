@@ -56,11 +56,19 @@ void data_init(Data *d, double start_time)
     for (int vr = 0; vr < N_VARS; vr++) {
         if (VARS[vr].type == T_REAL) {
             d->r[vr] = VARS[vr].start;
-        } else if (VARS[vr].type != T_STRING) {
+        } else if (VARS[vr].type == T_STRING) {
+            strncpy(d->s[vr], VARS[vr].start_string, STRING_MAX - 1);
+        } else {
             d->i[vr] = (int)VARS[vr].start;
         }
     }
     d->start_time = start_time;
+}
+
+void data_set_string(Data *d, int vr, const char *s)
+{
+    memset(d->s[vr], 0, STRING_MAX);
+    strncpy(d->s[vr], s, STRING_MAX - 1);
 }
 
 /* like the glue: step a copy, keep it only on success */
@@ -113,6 +121,7 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     lib.data_i.restype = ctypes.POINTER(ctypes.c_int)
     lib.data_init.argtypes = [ctypes.c_void_p, ctypes.c_double]
     lib.data_r.argtypes = lib.data_i.argtypes = [ctypes.c_void_p]
+    lib.data_set_string.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p]
     lib.model_initialize.argtypes = [ctypes.c_void_p, ctypes.c_char_p]
     lib.data_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_char_p]
     lib.state_get.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)]
@@ -137,6 +146,8 @@ class NativePlant:
         for name, value in (parameters or {}).items():
             if isinstance(value, float):
                 self.r[VR[name]] = value
+            elif isinstance(value, str):
+                lib.data_set_string(self.buf, VR[name], value.encode())
             else:
                 self.i[VR[name]] = int(value)
 
@@ -262,6 +273,40 @@ def test_other_parameters(lib):
     check_run(lib, contact_torques(3.0, params), params)
 
 
+@pytest.mark.parametrize("n", [1, 3])
+def test_euler_substeps(lib, paper_torques, n):
+    """euler_substeps = n (explicit Euler steps per communication step, the Fig. 4 reproduction
+    aid): bit for bit, it reaches the wall, and it is not the adaptive result (open loop: the
+    paper's torques drive the Euler plant elsewhere, so no closeness check)."""
+    nat_out, py_out, states = check_run(lib, paper_torques[:2400], {"euler_substeps": n})
+    assert states[:, 2].max() == 1.0
+    dopri = run_both(lib, paper_torques[:2400])[0]
+    assert not np.array_equal(bits(nat_out), bits(dopri))
+
+
+def test_one_euler_substep_is_one_explicit_step(lib):
+    """One step of h from rest: q unchanged, qd = h * qdd(q, 0, tau) (explicit Euler)."""
+    py = PlantModel({"euler_substeps": 1}, 0.0, None)
+    q0 = py.q
+    tau = (5.0, -3.0, 1.0)
+    qdd = py.arm.forward_dynamics(q0, (0.0, 0.0, 0.0), tau)
+    py.do_step(0.0, DT, tau)
+    assert py.q == q0
+    assert py.qd == tuple(DT * a for a in qdd)
+
+
+@pytest.mark.parametrize(
+    ("n", "message"), [(-1, "must be >= 0"), (10**6 + 1, "must be <= 1000000")]
+)
+def test_bad_euler_substeps_refused(lib, n, message):
+    with pytest.raises(ModelError, match=f"parameter euler_substeps {message}"):
+        PlantModel({"euler_substeps": n}, 0.0, None)
+    if n > 0:  # (the FMI glue refuses values below the minimum before the model sees them)
+        nat = NativePlant(lib, {"euler_substeps": n})
+        with pytest.raises(ModelError, match=f"parameter euler_substeps {message}"):
+            nat.initialize()
+
+
 def test_start_time_and_uneven_steps(lib):
     rng = random.Random(5)
     params = {"wall_x": 0.6, "q_noise": 1e-5, "noise_seed": 11}
@@ -359,6 +404,7 @@ def native_error(lib, parameters, steps=()) -> str:
         ({}, [(0.0, DT, (0.0, 0.0, 0.0)), (0.5, DT, (0.0, 0.0, 0.0))]),
         ({"max_rhs_evaluations": 10**8}, [(0.0, DT, (1e12, 0.0, 0.0))]),  # contact chattering
         ({"max_rhs_evaluations": 50}, [(0.0, 1.0, (0.0, 0.0, 0.0))]),  # the work bound
+        ({"max_rhs_evaluations": 50, "euler_substeps": 51}, [(0.0, DT, (0.0, 0.0, 0.0))]),
         ({}, [(0.0, DT, (1e30, 0.0, 0.0))]),  # step size underflow
         ({"q_quant": 1e-320}, ()),  # round() of an infinite ratio
         ({}, [(0.0, math.inf, (0.0, 0.0, 0.0))]),  # an infinite step

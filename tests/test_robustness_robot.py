@@ -126,13 +126,17 @@ def test_foreign_datagrams_mid_run_are_ignored(system, fmu_dir, robot):
     started = time.monotonic()
     thread.start()
     try:
+        while sent[0] < 250 and time.monotonic() - started < 30:  # the flood is on before the run
+            time.sleep(0.01)
+        before = sent[0]
         got = bridged(system, fmu_dir / "BridgePlant.fmu", port, 2.0)
+        during = sent[0] - before
     finally:
         stop.set()
         thread.join()
     seconds = time.monotonic() - started
     assert got.ok, got.error
-    assert sent[0] > 500
+    assert before >= 250 and during >= 50, (before, during)  # however loaded the machine is
     for name in ref.names:
         assert np.array_equal(got[name], ref[name]), name
     assert robot.proc.poll() is None

@@ -26,6 +26,9 @@
 #define N_OUTPUTS 24      /* VR_tau1 .. VR_e_phi, contiguous and in ControllerModel's order */
 
 static const char *const VELOCITY_SOURCES[3] = {"observer", "difference", "measured"};
+/* observer_discretization (OBSERVER_DISCRETIZATIONS) */
+static const char *const DISCRETIZATIONS[3] = {"euler", "implicit", "exponential"};
+enum { OBS_EULER = 0, OBS_IMPLICIT = 1, OBS_EXPONENTIAL = 2 };
 
 typedef struct {
     ArmParams arm; /* the controller's own model of the arm */
@@ -33,11 +36,18 @@ typedef struct {
     double K[3], G[3], B[3], yhat0[3], tau_max[3];
     double ts;
     int limit_torque;
+    int discretization; /* OBS_*, -1 if unknown (refused by model_initialize) */
 } Params;
 
 static void read_params(const Data *d, Params *p)
 {
     const double *r = d->r;
+    p->discretization = -1;
+    for (int k = 0; k < 3; k++) {
+        if (strncmp(d->s[VR_observer_discretization], DISCRETIZATIONS[k], STRING_MAX) == 0) {
+            p->discretization = k;
+        }
+    }
     p->arm.a1 = r[VR_a1];
     p->arm.a2 = r[VR_a2];
     p->arm.a3 = r[VR_a3];
@@ -164,6 +174,36 @@ static void float_repr(double x, char *buf, size_t size)
     snprintf(buf, size, "%s", out);
 }
 
+/* repr(s) of a str (ASCII escapes; other bytes copied as they are) */
+static void str_repr(const char *s, char *buf, size_t size)
+{
+    char out[4 * STRING_MAX + 3];
+    size_t n = 0, k, len = 0;
+    char quote;
+    while (len < STRING_MAX && s[len]) {
+        len++;
+    }
+    quote = memchr(s, '\'', len) && !memchr(s, '"', len) ? '"' : '\'';
+    out[n++] = quote;
+    for (k = 0; k < len; k++) {
+        const unsigned char ch = (unsigned char)s[k];
+        if (ch == (unsigned char)quote || ch == '\\') {
+            out[n++] = '\\';
+            out[n++] = (char)ch;
+        } else if (ch == '\n' || ch == '\r' || ch == '\t') {
+            out[n++] = '\\';
+            out[n++] = ch == '\n' ? 'n' : ch == '\r' ? 'r' : 't';
+        } else if (ch < 0x20 || ch == 0x7f) {
+            n += (size_t)sprintf(out + n, "\\x%02x", ch);
+        } else {
+            out[n++] = (char)ch;
+        }
+    }
+    out[n++] = quote;
+    out[n] = '\0';
+    snprintf(buf, size, "%s", out);
+}
+
 /* --- virtual trajectory, observer, impedance law --------------------------------------------- */
 
 static void virtual_trajectory(const Params *p, double t, double xv[3], double xv_dot[3],
@@ -210,8 +250,16 @@ static int observer_update(const Params *p, const double yhat_prev[3], const dou
         return fail(msg, "the inertia matrix of the controller's arm model is singular");
     }
     for (i = 0; i < 3; i++) {
-        yhat[i] = yhat_prev[i] + K[i] * (q_now[i] - q_prev[i]) + dt * acc[i] -
-                  dt * K[i] * yhat_prev[i];
+        const double dq = q_now[i] - q_prev[i];
+        if (p->discretization == OBS_IMPLICIT) {
+            yhat[i] = (yhat_prev[i] + K[i] * dq + dt * acc[i]) / (1.0 + dt * K[i]);
+        } else if (p->discretization == OBS_EXPONENTIAL) {
+            const double a = exp(-K[i] * dt);
+            yhat[i] = a * yhat_prev[i] + (1.0 - a) * (dq / dt + acc[i] / K[i]);
+        } else {
+            yhat[i] = yhat_prev[i] + K[i] * (q_now[i] - q_prev[i]) + dt * acc[i] -
+                      dt * K[i] * yhat_prev[i];
+        }
     }
     return 0;
 }
@@ -393,6 +441,13 @@ int model_initialize(Data *d, char *msg)
         return fail(msg,
                     "parameter velocity_source must be one of 1 (%s), 2 (%s), 3 (%s) (got %d)",
                     VELOCITY_SOURCES[0], VELOCITY_SOURCES[1], VELOCITY_SOURCES[2], source);
+    }
+    if (p.discretization < 0) {
+        char text[4 * STRING_MAX + 3];
+        str_repr(d->s[VR_observer_discretization], text, sizeof text);
+        return fail(msg,
+                    "parameter observer_discretization must be one of %s, %s, %s (got %s)",
+                    DISCRETIZATIONS[0], DISCRETIZATIONS[1], DISCRETIZATIONS[2], text);
     }
     memset(m, 0, sizeof *m);
     m->velocity_source = source - 1;

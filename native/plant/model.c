@@ -21,6 +21,7 @@
 #define H0 1e-3            /* s, the integrator's first step guess */
 #define MAX_SWITCHES 1000  /* contact mode switches per communication step */
 #define REPR 40            /* buffer size for py_float_repr */
+#define MAX_EULER_SUBSTEPS 1000000 /* per communication step (PlantModel's MAX_EULER_SUBSTEPS) */
 
 /* What the right-hand side and the event function need (PlantModel._rhs / _event closures). */
 typedef struct {
@@ -311,6 +312,29 @@ static int inverse_kinematics(const ArmParams *p, double x, double y, double phi
     return 0;
 }
 
+/* PlantModel._euler_steps (euler_substeps = n > 0): n explicit Euler steps of h / n, each in the
+ * mode at its start; the mode switches after a step if its switching function turned positive.
+ * A reproduction aid for Fig. 4, not a default. */
+static int euler_steps(PlantCtx *c, double y[ODE_N], double h, int n, int *mode, char *err)
+{
+    const double dt = h / (double)n;
+    for (int k = 0; k < n; k++) {
+        double y_new[ODE_N], g;
+        c->in_contact = *mode;
+        if (ode_euler_step(plant_rhs, c, y, dt, y_new, err)) {
+            return 1;
+        }
+        memcpy(y, y_new, sizeof y_new);
+        if (plant_event(c, y, &g, err)) {
+            return 1;
+        }
+        if (g > 0.0) {
+            *mode = !*mode;
+        }
+    }
+    return 0;
+}
+
 /* --- the model (glue.h) ---------------------------------------------------------------------- */
 
 /* The plant has no tunable parameters (the glue refuses every parameter set after
@@ -338,6 +362,10 @@ int model_initialize(Data *d, char *msg)
     if (inverse_kinematics(&c.arm, d->r[VR_x0], d->r[VR_y0], d->r[VR_phi0], d->i[VR_elbow_up] != 0,
                            q, msg)) {
         return 1;
+    }
+    if (d->i[VR_euler_substeps] > MAX_EULER_SUBSTEPS) { /* PlantSetup.validate */
+        return fail(msg, "parameter euler_substeps must be <= %d (got %d)", MAX_EULER_SUBSTEPS,
+                    (int)d->i[VR_euler_substeps]);
     }
     memset(m, 0, sizeof *m);
     m->t = d->start_time;
@@ -369,6 +397,7 @@ static int plant_step(Data *d, double t, double h, double *reached, char *msg)
     double y[ODE_N], t_end, t_cur, hh, scale;
     char err[ODE_MSG_MAX], a[REPR], b[REPR];
     int mode, switches = 0;
+    const int euler = (int)d->i[VR_euler_substeps];
     int64_t budget = d->i[VR_max_rhs_evaluations];
     read_ctx(d, &c);
     c.budget = &budget;
@@ -401,7 +430,10 @@ static int plant_step(Data *d, double t, double h, double *reached, char *msg)
     t_cur = t;
     mode = m->in_contact;
     hh = m->h;
-    for (;;) {
+    if (euler > 0 && euler_steps(&c, y, h, euler, &mode, err)) {
+        return fail(msg, "plant integration failed: %s", err);
+    }
+    while (euler == 0) {
         c.in_contact = mode;
         if (ode_integrate(plant_rhs, plant_event, &c, t_cur, y, t_end, hh, d->r[VR_rtol],
                           d->r[VR_atol], ODE_TIME_TOL, &res, err)) {
@@ -494,6 +526,10 @@ int model_me_check(const Data *d, char *msg)
                     " sampled-data effects of the co-simulation interface: set both to 0 or"
                     " use co-simulation",
                     d->r[VR_q_noise], d->r[VR_q_quant]);
+    }
+    if (d->i[VR_euler_substeps] != 0) {
+        return fail(msg, "euler_substeps = %d: under Model Exchange the host integrates the plant;"
+                         " set it to 0 or use co-simulation", (int)d->i[VR_euler_substeps]);
     }
     return 0;
 }

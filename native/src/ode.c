@@ -86,6 +86,19 @@ double ode_error_norm(const double y[ODE_N], const double y_new[ODE_N], const do
     return worst;
 }
 
+int ode_euler_step(OdeRhs f, void *ctx, const double y[ODE_N], double h, double y_new[ODE_N],
+                   char *msg)
+{
+    double k[ODE_N];
+    if (f(ctx, y, k, msg)) {
+        return ODE_FAILED;
+    }
+    for (int i = 0; i < ODE_N; i++) {
+        y_new[i] = y[i] + h * k[i];
+    }
+    return ODE_OK;
+}
+
 static int all_finite(const double y[ODE_N])
 {
     for (int i = 0; i < ODE_N; i++) {

@@ -35,6 +35,10 @@ typedef struct {
 int ode_dopri5_step(OdeRhs f, void *ctx, const double y[ODE_N], double h, const double k1[ODE_N],
                     double y_new[ODE_N], double err[ODE_N], double k7[ODE_N], char *msg);
 
+/* ode.euler_step: y_new = y + h f(y), one explicit Euler step (the plant's integrator = euler). */
+int ode_euler_step(OdeRhs f, void *ctx, const double y[ODE_N], double h, double y_new[ODE_N],
+                   char *msg);
+
 /* ode.error_norm: max-norm of err scaled by atol + rtol * max(|y|, |y_new|); NaN -> inf. */
 double ode_error_norm(const double y[ODE_N], const double y_new[ODE_N], const double err[ODE_N],
                       double rtol, double atol);

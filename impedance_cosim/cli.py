@@ -108,6 +108,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     from impedance_cosim.atomic import atomic_write
     from impedance_cosim.interrupt import RunInterrupted
     from impedance_cosim.master import Master
+    from impedance_cosim.realtime import realtime_setting
     from impedance_cosim.results import CsvStream
     from impedance_cosim.ssp import read_ssp
 
@@ -123,7 +124,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
             step_size=args.step,
             stop_time=args.stop,
             fmu_files=getattr(args, "fmu_files", None),
-            realtime=getattr(args, "realtime", False),
+            realtime=realtime_setting(args),
         )
         path = out / f"{master.parameter_set or 'run'}.csv"
         stderr, fmu_output = sys.stderr, io.StringIO()
@@ -217,6 +218,9 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
                         "plant.q_noise=1e-4 (repeatable)")  # fmt: skip
     p.add_argument("--realtime", action="store_true",
                    help="pace the steps to the wall clock; per-step timing recorded")  # fmt: skip
+    from impedance_cosim.realtime import add_options
+
+    add_options(p)
     p.add_argument("--out", default=out, help=f"output folder (default {out}/)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

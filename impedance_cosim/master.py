@@ -11,13 +11,13 @@
 - Recording: one row at t_0 (after initialization) and one at each t_i+1 = the outputs after the
   step that ends there (as FMI defines them: a sampled output holds the last sample's value), every
   Real output of every component ("plant.x", "controller.tau1", ...), so every connection too.
-- Real time (`realtime=True`): step i starts at the wall-clock time t0_wall + i * h (sleep, then a
-  short busy-wait), t0_wall taken after initialization; a late step is never skipped, the next
-  one starts at once (the schedule is absolute, so the master catches up). Per step the result
-  gets three extra columns: `rt.start_late_s` (actual start - scheduled start: the jitter),
+- Real time (`realtime=True`, or realtime.RealtimeOptions to also lock memory, run SCHED_FIFO,
+  pin a CPU, set the busy-wait): step i starts at the wall-clock time t0_wall + i * h, t0_wall
+  taken after initialization (the loop is realtime.paced_steps). Per step the result gets three
+  extra columns: `rt.start_late_s` (actual start - scheduled start: the jitter),
   `rt.compute_s` (the step's duration) and `rt.lateness_s` (completion - deadline
   t0_wall + (i + 1) h; > 0 is a deadline miss); RunResult.info["realtime"] holds the statistics
-  (see realtime_stats). The garbage collector is paused while stepping in real time.
+  (see realtime_stats) and the options' notes (what the OS granted or refused).
 - Every FMI status is checked. A failing FMU, a non-finite value or a value beyond
   `divergence_limit` stops the run with a message naming the signal and time; the rows computed so
   far are kept in the result.
@@ -29,7 +29,6 @@
 from __future__ import annotations
 
 import ctypes
-import gc
 import math
 import sys
 import time as wallclock
@@ -40,18 +39,25 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from impedance_cosim import fastloop
+from impedance_cosim import fastloop, realtime
 from impedance_cosim.fmi.variables import ENUMERATIONS
-from impedance_cosim.fmu import STATUS, FmuError, FmuInstance, check_fmu, fmi_value
+from impedance_cosim.fmu import (
+    STATUS,
+    FmuError,
+    FmuInstance,
+    check_fmu,
+    fmi_value,
+    model_description,
+)
 from impedance_cosim.fmu3 import is_fmi3, open_fmu, ssp_type
 from impedance_cosim.interrupt import RunInterrupted, StopSignals, signal_name
+from impedance_cosim.realtime import RealtimeOptions
 from impedance_cosim.results import Feed, Sink, size_problem
 from impedance_cosim.ssp import SspError, SystemDescription
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 CHUNK = 400  # steps per call into the loop (progress bar, interrupts)
 RT_COLUMNS = ["rt.start_late_s", "rt.compute_s", "rt.lateness_s"]
-SPIN_S = 0.0005  # real time: busy-wait this long before each step's start (sleep overshoots)
 MAX_INIT_PASSES = 20
 
 
@@ -147,9 +153,10 @@ class Master:
         divergence_limit: float = 1e6,
         fmu_files: Mapping[str, Path] | None = None,
         loop: str = "auto",
-        realtime: bool = False,
+        realtime: bool | RealtimeOptions = False,
         step_times: Callable[[int], tuple[float, float]] | None = None,
         zero_start_inputs: bool = False,
+        instances: Any = None,
     ) -> None:
         self.system = system
         # Another engine's conventions, to compare with it (Python loop only; engines.py has
@@ -187,6 +194,7 @@ class Master:
         loop = "python" if step_times or zero_start_inputs else loop
         self.loop = loop
         self.realtime = realtime
+        self.instances = instances  # an fmu_pool.InstancePool: reuse FMU instances across runs
         sets = system.parameter_sets
         if parameter_set is None:
             parameter_set = next(iter(sets), "")
@@ -214,14 +222,12 @@ class Master:
 
     def _collect_parameters(self, overrides: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
         """Parameter values per component, checked against the FMUs' variables and units."""
-        from fmpy import read_model_description
-
         self.descriptions = {}
         for name, path in self.fmu_files.items():
             if not path.is_file():
                 raise MasterError(f"component {name}: FMU {path} does not exist")
             try:
-                self.descriptions[name] = read_model_description(str(path))
+                self.descriptions[name] = model_description(path)
             except Exception as exc:
                 raise MasterError(f"component {name}: cannot read {path.name}: {exc}") from None
             try:
@@ -321,7 +327,9 @@ class Master:
         ordered: list[_Slot] = []
         try:
             for name in self.order:
-                ordered.append(_Slot(name, open_fmu(self.fmu_files[name], name)))
+                path = self.fmu_files[name]
+                fmu = self.instances.take(path, name, open_fmu) if self.instances else None
+                ordered.append(_Slot(name, fmu or open_fmu(path, name)))
             self._wire(ordered)
             self._initialize(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
@@ -337,8 +345,19 @@ class Master:
             step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
-                rows, error = self._realtime_steps(step, ordered, data, names, timing, bar, stop)
-                info["realtime"] = realtime_stats(timing[1:rows], h)
+                rt = self.realtime if isinstance(self.realtime, RealtimeOptions) else None
+                rt = rt or RealtimeOptions()
+                with realtime.applied(rt) as notes:
+                    rows, error = realtime.paced_steps(
+                        lambda i: step(ordered, data, names, i, 1),
+                        n,
+                        h,
+                        timing,
+                        rt.spin_s,
+                        lambda: stop.signum is not None,
+                        bar.update if bar else None,
+                    )
+                info["realtime"] = {**realtime_stats(timing[1:rows], h), "notes": notes}
             while not error and rows < n + 1 and stop.signum is None:
                 chunk = min(n + 1 - rows, CHUNK)
                 done, error = step(ordered, data, names, rows - 1, chunk)
@@ -356,9 +375,10 @@ class Master:
             for s in ordered:
                 try:
                     s.fmu.terminate()
+                    clean = error is None
                 except FmuError:
-                    pass
-                s.fmu.free()
+                    clean = False
+                self.instances.give(s.fmu, clean) if self.instances else s.fmu.free()
             feed(data, rows, timing)
         data = data[:rows]
         if self.realtime:
@@ -384,41 +404,6 @@ class Master:
             dst.sources.append((index[se], ordered[index[se]].outputs.index(sc)))
         for s in ordered:
             s.write = s.fmu.real_setter(s.inputs)
-
-    def _realtime_steps(
-        self, step, ordered, data, names, timing, bar, stop
-    ) -> tuple[int, str | None]:
-        """All steps one at a time, each started at its wall-clock time (see module docstring);
-        fills timing[i + 1] for step i; returns (rows filled, error or None)."""
-        h, n = self.step_size, len(data) - 1
-        clock = wallclock.perf_counter
-        rows, error = 1, None
-        collecting = gc.isenabled()
-        gc.disable()
-        try:
-            t_wall0 = clock()
-            for i in range(n):
-                if stop.signum is not None:
-                    break
-                scheduled = t_wall0 + i * h
-                remaining = scheduled - clock()
-                if remaining > SPIN_S:
-                    wallclock.sleep(remaining - SPIN_S)
-                while clock() < scheduled:
-                    pass
-                began = clock()
-                done, error = step(ordered, data, names, i, 1)
-                ended = clock()
-                timing[i + 1] = (began - scheduled, ended - began, ended - scheduled - h)
-                rows += done
-                if error:
-                    break
-                if bar:
-                    bar.update(i + 1)
-        finally:
-            if collecting:
-                gc.enable()
-        return rows, error
 
     def _python_steps(self, ordered, data, names, first: int, count: int):
         """Steps first .. first + count - 1 in Python; returns (rows filled, error or None)."""
@@ -574,7 +559,7 @@ def format_realtime(stats: dict[str, Any]) -> str:
         f"step duration: p50 {ms * stats['compute_p50_s']:.3f} ms, p99"
         f" {ms * stats['compute_p99_s']:.3f} ms, max {ms * stats['compute_max_s']:.3f} ms"
         f" (worst slack {-ms * stats['lateness_max_s']:.3f} ms)"
-    )
+    ) + "".join(f"\nreal time: {note}" for note in stats.get("notes", []))
 
 
 class _Progress:

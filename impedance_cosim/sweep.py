@@ -428,16 +428,19 @@ def _interrupted(error: str | None) -> bool:
     return bool(error) and error.lower().startswith("interrupted")
 
 
-def run_point(payload: bytes | str, digest: str, point: dict, options: dict) -> dict[str, Any]:
+def run_point(
+    payload: bytes | str, digest: str, point: dict, options: dict, instances: Any = None
+) -> dict[str, Any]:
     """One run of the sweep -> its table row (failures are rows); RunInterruptedError (or a
-    KeyboardInterrupt) when a signal stopped it, whatever the FMUs made of the signal."""
+    KeyboardInterrupt) when a signal stopped it, whatever the FMUs made of the signal.
+    instances: an fmu_pool.InstancePool to take the FMU instances from (sweep_batch)."""
     started = time.perf_counter()
     row: dict[str, Any] = dict(point)
     row.update(status="ok", error="")
     row.update({m: None for m in METRICS})
     try:
         system = _system(payload, digest)
-        result = Master(system, **master_arguments(point, options)).run()
+        result = Master(system, **master_arguments(point, options), instances=instances).run()
         if STOP["signal"] or _interrupted(result.error):
             raise RunInterruptedError(result.error or f"interrupted ({STOP['signal']})")
         row["t_end_s"] = float(result.data[-1, 0]) if len(result.data) else None
@@ -601,50 +604,12 @@ def run_dask(
     indices: Iterable[int] | None = None,
     record: Record | None = None,
 ) -> list[dict]:
-    """The plan's runs (or those at `indices`) as tasks on the client's workers; rows in the
-    plan's order; `record(index, row)` as each finishes. On an exception (e.g. Ctrl-C) the
-    runs not yet finished are cancelled."""
-    from concurrent.futures import CancelledError
+    """The plan's runs (or those at `indices`) on the client's workers, several runs per task
+    (sweep_batch); rows in the plan's order; `record(index, row)` as each batch finishes. On an
+    exception (e.g. Ctrl-C) the runs not yet finished are cancelled."""
+    from impedance_cosim import sweep_batch
 
-    from distributed import as_completed
-
-    order = list(range(len(plan.points)) if indices is None else indices)
-    data, digest = _payload(plan.ssp)
-    payload = client.scatter(data, broadcast=True, hash=False)
-    client.run(prepare_worker, data, digest)  # every worker prepares the system once
-    futures = [
-        client.submit(run_point, payload, digest, plan.points[i], plan.options, pure=False)
-        for i in order
-    ]
-    index = {f.key: i for f, i in zip(futures, order)}
-    rows: dict[int, dict] = {}
-    lost: list[str] = []
-    try:
-        for future in as_completed(futures):
-            i = index[future.key]
-            try:
-                row = future.result()
-            except RunInterruptedError:  # a worker's run was stopped by a signal: stop the sweep
-                raise
-            except CancelledError as exc:  # e.g. the scheduler went away: not the point's fault
-                lost.append(" ".join(str(exc).split()))
-                continue
-            except Exception as exc:  # the worker died (e.g. a crash inside an FMU)
-                row = dict(plan.points[i])
-                reason = " ".join(str(exc).split())
-                row.update(status="failed", error=f"task failed: {type(exc).__name__}: {reason}")
-                row.update({m: None for m in METRICS}, wall_s=None)
-            rows[i] = row
-            if record:
-                record(i, row)
-            if progress:
-                progress(len(rows), row)
-    finally:
-        if len(rows) + len(lost) < len(order):
-            client.cancel([f for f in futures if not f.done()])
-    if lost:
-        raise RunsLostError(f"dask lost {len(lost)} of {len(order)} runs ({lost[0]})")
-    return [rows[i] for i in order]
+    return sweep_batch.run_dask(plan, client, progress, indices, record)
 
 
 class ProgressBar:

@@ -1,0 +1,67 @@
+"""Where the Python models spend their time in the 20 s paper scenario (not a test): the plain
+closed loop (impedance_cosim.loop, no FMI) under cProfile, grouped by what the code computes,
+with the number of plant right-hand-side evaluations per communication step.
+
+    python benchmarks/model_profile.py [--stop 20]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import time
+
+from impedance_cosim.loop import run_models
+
+GROUPS = {  # (file suffix, function) -> group; everything else is "other"
+    "plant: arm dynamics H, C, g, solve (forward_dynamics)": [
+        ("arm.py", "forward_dynamics"),
+    ],
+    "plant: contact (end-effector x, wall force, event)": [
+        ("plant_model/model.py", "_ee_x"),
+        ("plant_model/model.py", "g"),
+    ],
+    "plant: integrator (Dormand-Prince stages, error norm, event location)": [
+        ("ode.py", "integrate"),
+    ],
+    "controller: sample (observer, impedance law, trajectory)": [
+        ("controller_model/model.py", "do_step"),
+    ],
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--stop", type=float, default=20.0)
+    args = parser.parse_args()
+    start = time.process_time()
+    run_models(stop_time=args.stop)
+    plain = time.process_time() - start
+    profile = cProfile.Profile()
+    profile.runcall(run_models, stop_time=args.stop)
+    stats = pstats.Stats(profile).stats  # (file, line, name) -> (cc, nc, tt, ct, callers)
+    total = sum(tt for _, _, tt, _, _ in stats.values())
+
+    def cumulative(file: str, name: str) -> tuple[float, int]:
+        found = [(v[3], v[1]) for k, v in stats.items() if k[0].endswith(file) and k[2] == name]
+        return (max(found)[0], max(found)[1]) if found else (0.0, 0)
+
+    steps = round(args.stop * 400)
+    rhs = sum(v[1] for k, v in stats.items() if k[2] == "forward_dynamics")
+    print(f"{args.stop:g} s scenario, {steps} steps: plain models {plain:.3f} s CPU "
+          f"({args.stop / plain:.1f}x real time); under cProfile {total:.2f} s")  # fmt: skip
+    print(f"plant right-hand sides: {rhs} ({rhs / steps:.1f} per communication step)")
+    print(f"{'share of the profiled time (cumulative, groups overlap where nested)':72} {'%':>5}")
+    for group, members in GROUPS.items():
+        ct = max(cumulative(f, n)[0] for f, n in members)
+        print(f"{group:72} {100 * ct / total:5.1f}")
+    print("\ntop functions by own time:")
+    ranked = sorted(stats.items(), key=lambda kv: -kv[1][2])[:12]
+    for (file, line, name), (_, calls, tt, _ct, _) in ranked:
+        where = "/".join(file.split("/")[-2:])
+        print(f"  {100 * tt / total:5.1f}%  {calls:8d} calls  {name} ({where}:{line})")
+
+
+if __name__ == "__main__":
+    main()

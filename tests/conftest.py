@@ -40,6 +40,12 @@ def native_dir(fmu_dir: Path) -> Path:
     return out
 
 
+@pytest.fixture(scope="session")
+def native_ssp(native_dir: Path) -> Path:
+    """The paper's system archive with the native FMUs, built from this checkout."""
+    return native_dir.parent / "PaperScenario-native.ssp"
+
+
 def output_dict(model) -> dict[str, float]:
     """A model's outputs by name."""
     names = [v.name for v in model.variables() if v.causality == "output"]

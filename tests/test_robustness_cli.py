@@ -102,11 +102,6 @@ def _wrong_guid(name: str, data: bytes) -> bytes:
 
 
 @pytest.fixture(scope="module")
-def native_ssp(native_dir: Path) -> Path:
-    return native_dir.parent / "PaperScenario-native.ssp"
-
-
-@pytest.fixture(scope="module")
 def bad_archives(native_ssp: Path, tmp_path_factory) -> dict[str, Path]:
     """The native system with one defect each."""
     out = tmp_path_factory.mktemp("bad")

@@ -111,11 +111,6 @@ def test_signal_stops_a_serial_sweep_keeps_rows_and_resume_finishes_it(
 
 
 @pytest.fixture(scope="module")
-def native_ssp(native_dir):
-    return native_dir.parent / "PaperScenario-native.ssp"
-
-
-@pytest.fixture(scope="module")
 def native_grid(native_ssp) -> list[str]:
     return ["--grid", "controller.K=lin:10:100:40", "--stop", "30", "--ssp", str(native_ssp)]
 

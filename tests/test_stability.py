@@ -20,7 +20,6 @@ from impedance_cosim.stability_study import read_csv
 
 REPO = Path(__file__).resolve().parent.parent
 DOCS = REPO / "docs"
-NATIVE_SSP = REPO / "fmus" / "PaperScenario-native.ssp"
 
 
 # --- bisection ----------------------------------------------------------------------------------
@@ -141,7 +140,7 @@ def test_loop_map_state_is_complete(reference, algorithm):
     assert np.allclose(twice, m.state(), rtol=1e-9, atol=1e-9)
 
 
-def test_linear_prediction_brackets_the_simulated_boundary(reference):
+def test_linear_prediction_brackets_the_simulated_boundary(reference, native_ssp):
     """Sample-and-hold, true velocity: the linearised contact point predicts the critical rate,
     and the native co-simulation diverges 4 % below it and stays bounded 4 % above it."""
     from impedance_cosim.master import Master
@@ -151,7 +150,7 @@ def test_linear_prediction_brackets_the_simulated_boundary(reference):
         lambda r: linearize.loop_radius(r, "gauss-seidel", "measured", reference=reference)[0],
         150.0, 400.0, 0.5)  # fmt: skip
     assert 180.0 < pred < 230.0
-    system = read_ssp(NATIVE_SSP)
+    system = read_ssp(native_ssp)
     outcome = {}
     for rate in (round(0.96 * pred), round(1.04 * pred)):
         r = Master(system, parameter_set="measured", step_size=1 / rate, stop_time=20.0,
@@ -177,9 +176,9 @@ def test_oscillation_measures_a_known_growing_mode():
 # --- the study commands reproduce the committed tables ------------------------------------------
 
 
-def cli(*args: str, tmp_path: Path) -> None:
+def cli(*args: str, tmp_path: Path, ssp: Path) -> None:
     done = subprocess.run([sys.executable, "-m", "impedance_cosim.cli", "stability", *args,
-                           "--serial", "--no-figures", "--out", str(tmp_path)],
+                           "--serial", "--no-figures", "--ssp", str(ssp), "--out", str(tmp_path)],
                           capture_output=True, text=True, timeout=600)  # fmt: skip
     assert done.returncode == 0, done.stderr
 
@@ -189,10 +188,10 @@ def matching(rows, ref_rows, keys):
     return [(r, ref[tuple(r[k] for k in keys)]) for r in rows]
 
 
-def test_study_reproduces_committed_tables(tmp_path):
+def test_study_reproduces_committed_tables(tmp_path, native_ssp):
     cli("boundaries", "linear", "fig4", "--quantity", "rate", "--quantity", "K", "--sensor",
         "ideal", "--velocity", "measured", "--velocity", "observer", "--timing", "gauss-seidel",
-        "--condition", "euler", tmp_path=tmp_path)  # fmt: skip
+        "--condition", "euler", tmp_path=tmp_path, ssp=native_ssp)  # fmt: skip
     keys = ("quantity", "velocity", "timing", "sensor", "discretization")
     pairs = matching(read_csv(tmp_path / "boundaries.csv"), read_csv(DOCS / "boundaries.csv"), keys)
     assert len(pairs) == 5
@@ -214,8 +213,8 @@ def test_study_reproduces_committed_tables(tmp_path):
             assert got[k] == (pytest.approx(v, rel=1e-9) if isinstance(v, float) else v), k
 
 
-def test_gain_table_reproduces(tmp_path):
-    cli("gain", tmp_path=tmp_path)
+def test_gain_table_reproduces(tmp_path, native_ssp):
+    cli("gain", tmp_path=tmp_path, ssp=native_ssp)
     got = read_csv(tmp_path / "observer_discretization.csv")
     assert got == read_csv(DOCS / "observer_discretization.csv")
 
@@ -266,11 +265,11 @@ def test_observer_pole_of_each_discretization(form, pole, kh):
         assert y1 / y0 == pytest.approx(pole(kh), rel=1e-6)
 
 
-def test_a_parameter_the_system_lacks_is_an_error_before_any_run(monkeypatch):
+def test_a_parameter_the_system_lacks_is_an_error_before_any_run(monkeypatch, native_ssp):
     """Not a bracket of "unstable" runs: the study refuses to start."""
     from impedance_cosim.master import MasterError
 
     case = stability.Case("rate", "observer", "gauss-seidel", "ideal")
     monkeypatch.setitem(stability.SENSORS, "ideal", {"plant.no_such_thing": 1.0})
     with pytest.raises(MasterError, match="unknown parameter plant.no_such_thing"):
-        stability.run_study([case], NATIVE_SSP)
+        stability.run_study([case], native_ssp)

@@ -165,8 +165,6 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
     """Build the native (C99) flavour of an FMU: the same variables as the Python FMU, a library
     per platform with a compiler here (binaries/linux64, win64, aarch64-linux: see toolchains.py)
     and its sources/ (with buildDescription.xml) so tools can build it for another platform."""
-    import platform
-
     cls = spec.load_model_class()
     sources = _native_sources(spec)
     c_files = sorted(n for n in sources if n.endswith(".c"))
@@ -181,25 +179,41 @@ def build_native_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "native") -> P
     guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     sources["guid.h"] = f'#define MODEL_GUID "{guid}"\n'.encode()
     sources["buildDescription.xml"] = _build_description(cls.MODEL_NAME, c_files)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    target = Path(out_dir) / f"{cls.MODEL_NAME}.fmu"
+    return pack_native_fmu(target, xml(guid), sources, c_files, cls.MODEL_NAME)
+
+
+def pack_native_fmu(
+    target: Path,
+    xml: bytes,
+    sources: dict[str, bytes],
+    c_files: list[str],
+    model_identifier: str,
+    fmi_version: int = 2,
+) -> Path:
+    """Compile the sources for every platform with a compiler here and write the native FMU
+    archive (modelDescription, binaries/, sources/, documentation/) atomically to target."""
+    import platform
+
+    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+        raise RuntimeError("the native build runs on linux64 (x86_64) only")
+    target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="impcosim_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
         for name, content in sources.items():
             (src / name).write_bytes(content)
-        if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
-            raise RuntimeError("the native build runs on linux64 (x86_64) only")
-        binaries = toolchains.build_binaries(src, cls.MODEL_NAME, c_files)
-        target = out_dir / f"{cls.MODEL_NAME}.fmu"
+        binaries = toolchains.build_binaries(
+            src, model_identifier, c_files, fmi_version=fmi_version
+        )
         tmp_target = temp_path(target)
         with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr(_info("modelDescription.xml"), xml(guid))
+            z.writestr(_info("modelDescription.xml"), xml)
             for name in sorted(binaries):
                 z.writestr(_info(name, 0o755), binaries[name])
             for name in sorted(sources):
                 z.writestr(_info(f"sources/{name}"), sources[name])
-            _add_documentation(z, xml(guid), "native C99")
+            _add_documentation(z, xml, "native C99")
         tmp_target.replace(target)
     return target
 
@@ -220,8 +234,11 @@ def _add_documentation(z: zipfile.ZipFile, model_description: bytes, flavour: st
         z.writestr(_info(name), data)
 
 
-def _build_description(model_identifier: str, c_files: list[str]) -> bytes:
-    root = ET.Element("fmiBuildDescription", {"fmiVersion": "2.0"})
+def _build_description(
+    model_identifier: str, c_files: list[str], fmi_version: str = "2.0"
+) -> bytes:
+    """buildDescription.xml: one C99 configuration of the given source files, linked with libm."""
+    root = ET.Element("fmiBuildDescription", {"fmiVersion": fmi_version})
     conf = ET.SubElement(root, "BuildConfiguration", {"modelIdentifier": model_identifier})
     files = ET.SubElement(conf, "SourceFileSet", {"language": "C99"})
     for name in c_files:

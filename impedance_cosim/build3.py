@@ -18,12 +18,10 @@ import shutil
 import sys
 import tempfile
 import uuid
-import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
 import impedance_cosim
-from impedance_cosim import toolchains
 from impedance_cosim.atomic import temp_path
 from impedance_cosim.build import (
     DEFAULT_OUT,
@@ -31,9 +29,11 @@ from impedance_cosim.build import (
     NATIVE,
     FmuSpec,
     _add_documentation,
+    _build_description,
     _info,
     _native_sources,
     build_ssp,
+    pack_native_fmu,
 )
 from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
 
@@ -91,38 +91,10 @@ def build_native_fmu3(
         digest.update(name.encode() + sources[name])
     token = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
-    sources["buildDescription.xml"] = _build_description3(cls.MODEL_NAME, c_files)
+    sources["buildDescription.xml"] = _build_description(cls.MODEL_NAME, c_files, "3.0")
+    target = Path(out_dir) / f"{CLOCKED_NAME if clock else cls.MODEL_NAME}.fmu"
     xml = _xml(cls, token, clock, early)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="impcosim_fmi3_") as tmp:
-        src = Path(tmp) / "sources"
-        src.mkdir()
-        for name, content in sources.items():
-            (src / name).write_bytes(content)
-        binaries = toolchains.build_binaries(src, cls.MODEL_NAME, c_files, fmi_version=3)
-        target = out_dir / f"{CLOCKED_NAME if clock else cls.MODEL_NAME}.fmu"
-        tmp_target = temp_path(target)
-        with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr(_info("modelDescription.xml"), xml)
-            for name in sorted(binaries):
-                z.writestr(_info(name, 0o755), binaries[name])
-            for name in sorted(sources):
-                z.writestr(_info(f"sources/{name}"), sources[name])
-            _add_documentation(z, xml, "native C99")
-        tmp_target.replace(target)
-    return target
-
-
-def _build_description3(model_identifier: str, c_files: list[str]) -> bytes:
-    root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
-    conf = ET.SubElement(root, "BuildConfiguration", {"modelIdentifier": model_identifier})
-    files = ET.SubElement(conf, "SourceFileSet", {"language": "C99"})
-    for name in c_files:
-        ET.SubElement(files, "SourceFile", {"name": name})
-    ET.SubElement(conf, "Library", {"name": "m"})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    return pack_native_fmu(target, xml, sources, c_files, cls.MODEL_NAME, fmi_version=3)
 
 
 SCRIPT3 = '''"""pythonfmu3 slave script of {name} as FMI 3.0: a thin shell over {cls}."""

@@ -27,7 +27,8 @@ from impedance_cosim.ssp import read_ssp
 
 def time_fmpy(ssp: Path, stop: float, step: float) -> float:
     import fmpy.ssp.simulation as sim
-    from fmpy.ssp.ssd import read_ssv
+
+    from impedance_cosim.engines import fmpy_bindings
 
     original = sim.instantiate_fmu
 
@@ -37,8 +38,7 @@ def time_fmpy(ssp: Path, stop: float, step: float) -> float:
             if connector.kind in ("input", "output"):
                 connector.value = sim.get_value(component, connector.name)
 
-    parameters = read_ssv(str(ssp), resource="resources/observer.ssv")
-    parameters.parameters = [p for p in parameters.parameters if p.type == "Real"]
+    parameters = fmpy_bindings(ssp)  # the archive's default scenario (observer)
     sim.instantiate_fmu = instantiate_with_start_values
     try:
         start = time.perf_counter()

@@ -215,12 +215,9 @@ def nanosecond_times(start: float, step: float) -> Callable[[int], tuple[float, 
 # --- fmpy's simulate_ssp and ecospy: each run with the engine's own API only ---------------------
 
 
-def run_in_fmpy(ssp_path: str | Path, stop_time: float, step_size: float) -> dict[str, np.ndarray]:
-    """fmpy's simulate_ssp on an archive's SystemStructure.ssd. It applies no ParameterBinding
-    itself, so the bindings (read with fmpy's own read_ssd) are passed as its parameter_set.
-    Returns every connector as "component.connector": row i holds the values after step i (fmpy
-    stamps it with the step's start time, which is left out), stop_time / step_size rows."""
-    from fmpy.ssp.simulation import simulate_ssp
+def fmpy_bindings(ssp_path: str | Path):
+    """The ParameterBindings of an archive's SystemStructure.ssd as one fmpy ParameterSet with
+    whole "component.variable" names: simulate_ssp applies no binding itself."""
     from fmpy.ssp.ssd import ParameterSet, read_ssd
 
     bound = ParameterSet(name="bound")
@@ -228,8 +225,21 @@ def run_in_fmpy(ssp_path: str | Path, stop_time: float, step_size: float) -> dic
         for p in (p for b in c.parameterBindings for s in b.parameterValues for p in s.parameters):
             p.name = f"{c.name}.{p.name}"  # component-relative names, as fmpy wants them whole
             bound.parameters.append(p)
+    return bound
+
+
+def run_in_fmpy(ssp_path: str | Path, stop_time: float, step_size: float) -> dict[str, np.ndarray]:
+    """fmpy's simulate_ssp on an archive's SystemStructure.ssd. It applies no ParameterBinding
+    itself, so the bindings (read with fmpy's own read_ssd) are passed as its parameter_set.
+    Returns every connector as "component.connector": row i holds the values after step i (fmpy
+    stamps it with the step's start time, which is left out), stop_time / step_size rows."""
+    from fmpy.ssp.simulation import simulate_ssp
+
     rows = simulate_ssp(
-        str(ssp_path), stop_time=stop_time, step_size=step_size, parameter_set=bound
+        str(ssp_path),
+        stop_time=stop_time,
+        step_size=step_size,
+        parameter_set=fmpy_bindings(ssp_path),
     )
     n = round(stop_time / step_size)  # fmpy's accumulated time may add one more step
     return {name: rows[name][:n] for name in rows.dtype.names if name != "time"}

@@ -256,6 +256,22 @@ def _fmt(value: float | int | bool | str) -> str:
     return str(value)
 
 
+def add_unit_definitions(root: ET.Element, used: list[str]) -> None:
+    """<UnitDefinitions> of the named units (SI base-unit exponents, display units), the same
+    element in FMI 2.0 and 3.0; a unit missing from UNITS is a ValueError."""
+    unknown = [u for u in used if u not in UNITS]
+    if unknown:
+        raise ValueError(f"units {unknown} are not defined in UNITS")
+    units = ET.SubElement(root, "UnitDefinitions")
+    for u in used:
+        unit = ET.SubElement(units, "Unit", {"name": u})
+        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
+        if u in DISPLAY_UNITS:
+            name, factor, offset = DISPLAY_UNITS[u]
+            display = {"name": name, "factor": repr(factor), "offset": repr(offset)}
+            ET.SubElement(unit, "DisplayUnit", display)
+
+
 def model_description(
     model_name: str,
     description: str,
@@ -327,17 +343,10 @@ def model_description(
         for name in source_files or ():
             ET.SubElement(files, "File", {"name": name})
     used = sorted({v.unit for v in variables if v.unit})
-    unknown = [u for u in used if u not in UNITS or u not in QUANTITIES]
+    unknown = [u for u in used if u not in QUANTITIES]
     if unknown:
-        raise ValueError(f"units {unknown} are not defined in UNITS")
-    units = ET.SubElement(root, "UnitDefinitions")
-    for u in used:
-        unit = ET.SubElement(units, "Unit", {"name": u})
-        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
-        if u in DISPLAY_UNITS:
-            name, factor, offset = DISPLAY_UNITS[u]
-            display = {"name": name, "factor": repr(factor), "offset": repr(offset)}
-            ET.SubElement(unit, "DisplayUnit", display)
+        raise ValueError(f"units {unknown} have no quantity in QUANTITIES")
+    add_unit_definitions(root, used)
     _type_definitions(root, used, variables)
     cats = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES.items():

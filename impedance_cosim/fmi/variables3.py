@@ -16,10 +16,10 @@ from impedance_cosim.fmi.variables import (
     COPYRIGHT,
     LICENSE,
     LOG_CATEGORIES,
-    UNITS,
     ModelExchange,
     Variable,
     _fmt,
+    add_unit_definitions,
     derivative_variables,
 )
 
@@ -126,18 +126,7 @@ def model_description3(
             },
         )
     used = sorted({v.unit for v in table if v.unit} | {"s"})
-    unknown = [u for u in used if u not in UNITS]
-    if unknown:
-        raise ValueError(f"units {unknown} are not defined in UNITS")
-    units = ET.SubElement(root, "UnitDefinitions")
-    for u in used:
-        unit = ET.SubElement(units, "Unit", {"name": u})
-        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
-        if u in DISPLAY_UNITS:
-            name, factor, offset = DISPLAY_UNITS[u]
-            ET.SubElement(
-                unit, "DisplayUnit", {"name": name, "factor": repr(factor), "offset": repr(offset)}
-            )
+    add_unit_definitions(root, used)
     _type_definitions(root, [u for u in used if u in QUANTITIES], table)
     cats = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES.items():

@@ -20,6 +20,8 @@ from impedance_cosim import __version__
 AUTHOR = "The impedance-cosim authors"
 COPYRIGHT = "Copyright (c) 2026, The impedance-cosim authors"
 LICENSE = "BSD-2-Clause (see documentation/licenses/license.txt)"
+# The modelDescription attributes that say who made the FMU and under which terms (FMI 2 and 3).
+METADATA = {"author": AUTHOR, "version": __version__, "copyright": COPYRIGHT, "license": LICENSE}
 # Base-unit exponents (kg, m, s, rad) of every unit the models use.
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -301,10 +303,7 @@ def model_description(
             "modelName": model_name,
             "guid": guid,
             "description": description,
-            "author": AUTHOR,
-            "version": __version__,
-            "copyright": COPYRIGHT,
-            "license": LICENSE,
+            **METADATA,
             "generationTool": generation_tool,
             "variableNamingConvention": "flat",
             "numberOfEventIndicators": str(

@@ -9,13 +9,10 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-from impedance_cosim import __version__
 from impedance_cosim.fmi import variables as _fmi2
 from impedance_cosim.fmi.variables import (
-    AUTHOR,
-    COPYRIGHT,
-    LICENSE,
     LOG_CATEGORIES,
+    METADATA,
     ModelExchange,
     Variable,
     _fmt,
@@ -91,10 +88,7 @@ def model_description3(
             "modelName": model_name,
             "instantiationToken": token,
             "description": description,
-            "author": AUTHOR,
-            "version": __version__,
-            "copyright": COPYRIGHT,
-            "license": LICENSE,
+            **METADATA,
             "generationTool": generation_tool,
             "variableNamingConvention": "flat",
         },

@@ -261,6 +261,13 @@ def main(argv: list[str] | None = None) -> int:
         return _dispatch(args)
 
 
+def entry() -> None:
+    """The console script: main(), then leave the process safely (see fmu.exit_process)."""
+    from impedance_cosim.fmu import exit_process
+
+    exit_process(main())
+
+
 def _dispatch(args: argparse.Namespace) -> int:
     """Run a subcommand; every failure becomes one line on stderr and an exit status:
     2 bad input, 1 a failed run or other error, 128 + signal number when interrupted."""

@@ -7,14 +7,16 @@ from __future__ import annotations
 import atexit
 import contextlib
 import ctypes
+import os
 import shutil
+import sys
 import tempfile
 import threading
 import zipfile
 from collections.abc import Iterable, Mapping
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from fmpy import (
     calloc,
@@ -149,6 +151,25 @@ class _Extractions:
 
 _extractions = _Extractions()
 atexit.register(_extractions.clear)
+
+# FMU libraries left loaded after fmi2Fatal (see FmuInstance.free)
+_leaked_libraries: list[str] = []
+
+
+def exit_process(code: int) -> NoReturn:
+    """Leave the process with `code`. If a library had to stay loaded after fmi2Fatal, skip the
+    C library destructors: pythonfmu 0.7's `finalizePythonInterpreter` runs at exit on a static
+    already destroyed and corrupts the heap (valgrind shows the read; glibc then aborts, exit
+    -6, in some runs). Python's own exit work (atexit, flushing) still runs first."""
+    if not _leaked_libraries:
+        sys.exit(code)
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
 
 
 class FmuInstance:
@@ -350,6 +371,7 @@ class FmuInstance:
             self._alive = False
             if self.fatal:
                 self._extraction = None  # still in use: never pruned, removed at exit
+                _leaked_libraries.append(self.name)
                 return
             self.slave.freeInstance()
         self._release()

@@ -318,6 +318,6 @@ def _one_line(exc: BaseException) -> str:
 if __name__ == "__main__":
     # Run the imported module's main, not this __main__ copy: otherwise CliError raised by other
     # modules (impedance_cosim.cli.CliError) would be another class than the one caught here.
-    from impedance_cosim.cli import main as _main
+    from impedance_cosim.cli import entry as _entry
 
-    sys.exit(_main())
+    _entry()

@@ -187,6 +187,8 @@ for k in range(3):
     assert Master(system, stop_time=0.1).run().ok
     gc.collect()
 print("survived")
+from impedance_cosim.fmu import exit_process
+exit_process(0)  # the libraries left loaded after fmi2Fatal: see exit_process
 """
     done = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=60

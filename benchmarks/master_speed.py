@@ -19,16 +19,16 @@ import time
 import zipfile
 from pathlib import Path
 
-from impedance_cosim.build import DEFAULT_OUT, build_all
-from impedance_cosim.loop import run_models
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
 
 
 def time_fmpy(ssp: Path, stop: float, step: float) -> float:
     import fmpy.ssp.simulation as sim
 
-    from impedance_cosim.engines import fmpy_bindings
+    from impedance_cosim.cosim.engines import fmpy_bindings
 
     original = sim.instantiate_fmu
 

@@ -1,5 +1,5 @@
 """Where the Python models spend their time in the 20 s paper scenario (not a test): the plain
-closed loop (impedance_cosim.loop, no FMI) under cProfile, grouped by what the code computes,
+closed loop (impedance_cosim.cosim.loop, no FMI) under cProfile, grouped by what the code computes,
 with the number of plant right-hand-side evaluations per communication step.
 
     python benchmarks/model_profile.py [--stop 20]
@@ -12,7 +12,7 @@ import cProfile
 import pstats
 import time
 
-from impedance_cosim.loop import run_models
+from impedance_cosim.cosim.loop import run_models
 
 GROUPS = {  # (file suffix, function) -> group; everything else is "other"
     "plant: arm dynamics H, C, g, solve (forward_dynamics)": [

@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 import time
 
-from impedance_cosim.build import DEFAULT_OUT, build_all
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
 
 STOP = 20.0
 

@@ -1,9 +1,9 @@
 """The paper scenario in another engine, libcosim, next to our master (not a test: prints numbers).
 
 Runs fmus/PaperScenario.ssp (built if missing) in libcosim's fixed-step algorithm (Jacobi; see
-impedance_cosim/engines.py for its conventions), then in our master as Jacobi and as Gauss-Seidel,
-and prints the wall times and the largest differences on the main signals. --csv writes
-libcosim's rows (time and every output).
+impedance_cosim/cosim/engines.py for its conventions), then in our master as Jacobi and as
+Gauss-Seidel, and prints the wall times and the largest differences on the main signals. --csv
+writes libcosim's rows (time and every output).
 
     pip install libcosimpy==0.0.6
     python benchmarks/other_engine.py [--set observer] [--stop 20] [--csv libcosim.csv]
@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
-from impedance_cosim.build import DEFAULT_OUT, build_all
-from impedance_cosim.engines import EngineError, run_in_libcosim
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim.engines import EngineError, run_in_libcosim
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
 
 STEP = 1 / 400
 SIGNALS = ["plant.x", "plant.y", "plant.contact_force", "plant.qd1", "plant.qd2", "plant.qd3"]

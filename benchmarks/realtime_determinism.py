@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from impedance_cosim.build import DEFAULT_OUT, build_all
-from impedance_cosim.master import Master
-from impedance_cosim.realtime import RealtimeOptions
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.realtime import RealtimeOptions
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
 
 
 @contextlib.contextmanager

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from impedance_cosim import linearize as lin
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.apps import linearize as lin
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
 
 SSP = Path(__file__).resolve().parent.parent / "fmus" / "PaperScenario-native.ssp"
 

@@ -13,7 +13,7 @@ import argparse
 import os
 import time
 
-from impedance_cosim import sweep
+from impedance_cosim.apps import sweep
 
 GRID = [  # 4 x 4 x 2 x 2 = 64 runs, all stable (full length) under Gauss-Seidel at 400 Hz
     "controller.K=10,25,50,100",

@@ -39,9 +39,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridge_model import protocol
-from impedance_cosim.arm import _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
 from impedance_cosim.fmi.variables import Variable, parameters_of
+from impedance_cosim.physics.arm import _p, check_fields
 from plant_model.model import INPUTS, PlantModel
 
 RESEND_S = 0.1

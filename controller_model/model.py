@@ -30,7 +30,6 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from impedance_cosim.arm import Arm, ArmParams, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
 from impedance_cosim.fmi.variables import (
     SAMPLED_INPUTS,
@@ -40,7 +39,8 @@ from impedance_cosim.fmi.variables import (
     parameters_of,
     vector,
 )
-from impedance_cosim.linalg3 import Vec3, matTvec, matvec, solve
+from impedance_cosim.physics.arm import Arm, ArmParams, _p, check_fields
+from impedance_cosim.physics.linalg3 import Vec3, matTvec, matvec, solve
 
 TWO_PI = 2.0 * math.pi
 SINGULAR_TOL = 1e-6  # |det J| below SINGULAR_TOL * a1 * a2 (i.e. |sin q2| < 1e-6) is singular

@@ -13,7 +13,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from impedance_cosim.interrupt import signal_name, sigterm_raises
+from impedance_cosim.util.interrupt import signal_name, sigterm_raises
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_SSP = REPO / "fmus" / "PaperScenario.ssp"
@@ -31,7 +31,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
-    from impedance_cosim.build import build_all
+    from impedance_cosim.packaging.build import build_all
 
     for path in build_all(prepare_out(Path(args.out)), args.only or None):
         print(f"built {path}")
@@ -41,12 +41,13 @@ def _cmd_build(args: argparse.Namespace) -> int:
 def _stale(target: Path) -> bool:
     """True when target is missing or older than a file it is built from (the code bundled into
     the FMUs, the build itself, the SSP sources)."""
-    from impedance_cosim.build import FMU_CORE, FMUS
+    from impedance_cosim.packaging.build import FMU_CORE, FMUS
 
     if not target.is_file():
         return True
     core = REPO / "impedance_cosim"
-    sources = [core / "build.py", core / "system.py", *(core / item for item in FMU_CORE)]
+    sources = [core / "packaging" / "build.py", core / "cosim" / "system.py"]
+    sources += [core / item for item in FMU_CORE]
     sources += [REPO / spec.package for spec in FMUS.values()] + [REPO / "ssp"]
     files = [f for s in sources for f in ([s] if s.is_file() else s.rglob("*"))]
     built = target.stat().st_mtime
@@ -89,7 +90,7 @@ def prepare_out(folder: Path) -> Path:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from impedance_cosim.atomic import FolderLock
+    from impedance_cosim.util.atomic import FolderLock
 
     overrides = parse_overrides(args.set or [])
     out = prepare_out(Path(args.out))
@@ -104,13 +105,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Path) -> int:
     """The chosen scenario (CSV as it runs, summary, figures) and, for Fig. 4, its pair; 1 when
     any of them failed."""
-    from impedance_cosim import analysis
-    from impedance_cosim.atomic import atomic_write
-    from impedance_cosim.interrupt import RunInterrupted
-    from impedance_cosim.master import Master
-    from impedance_cosim.realtime import realtime_setting
-    from impedance_cosim.results import CsvStream
-    from impedance_cosim.ssp import read_ssp
+    from impedance_cosim.apps import analysis
+    from impedance_cosim.cosim.master import Master
+    from impedance_cosim.cosim.realtime import realtime_setting
+    from impedance_cosim.cosim.results import CsvStream
+    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.util.atomic import atomic_write
+    from impedance_cosim.util.interrupt import RunInterrupted
 
     system = args.system = read_ssp(ssp)  # closed by _dispatch()
     progress = sys.stderr.isatty() and not args.no_progress
@@ -153,7 +154,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     values = analysis.summary(main)
     print(analysis.format_summary(values))
     if "realtime" in main.info:
-        from impedance_cosim.master import format_realtime
+        from impedance_cosim.cosim.master import format_realtime
 
         values["realtime"] = main.info["realtime"]
         print(format_realtime(main.info["realtime"]))
@@ -182,7 +183,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
 
 def _figure(draw, path: Path, *runs) -> None:
     """draw(*runs, path) through a temporary file renamed into place (a figure is whole or old)."""
-    from impedance_cosim import atomic
+    from impedance_cosim.util import atomic
 
     tmp = atomic.temp_path(path, suffix=".tmp" + path.suffix)  # the suffix picks the format
     try:
@@ -218,7 +219,7 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
                         "plant.q_noise=1e-4 (repeatable)")  # fmt: skip
     p.add_argument("--realtime", action="store_true",
                    help="pace the steps to the wall clock; per-step timing recorded")  # fmt: skip
-    from impedance_cosim.realtime import add_options
+    from impedance_cosim.cosim.realtime import add_options
 
     add_options(p)
     p.add_argument("--out", default=out, help=f"output folder (default {out}/)")
@@ -239,20 +240,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", action="append", choices=["plant", "controller", "bridge"],
                    help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
     p.set_defaults(func=_cmd_build)
-    from impedance_cosim import dist
+    from impedance_cosim.packaging import dist
 
     dist.add_parser(sub)
 
     p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures")
     add_run_options(p)
     p.set_defaults(func=_cmd_run)
-    from impedance_cosim import sweep
+    from impedance_cosim.apps import sweep
 
     sweep.add_parser(sub)
-    from impedance_cosim import stability_study
+    from impedance_cosim.apps import stability_study
 
     stability_study.add_parser(sub)
-    from impedance_cosim.hil import add_parsers as add_hil_parsers
+    from impedance_cosim.apps.hil import add_parsers as add_hil_parsers
 
     add_hil_parsers(sub)
 
@@ -263,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def entry() -> None:
     """The console script: main(), then leave the process safely (see fmu.exit_process)."""
-    from impedance_cosim.fmu import exit_process
+    from impedance_cosim.cosim.fmu import exit_process
 
     exit_process(main())
 
@@ -271,12 +272,12 @@ def entry() -> None:
 def _dispatch(args: argparse.Namespace) -> int:
     """Run a subcommand; every failure becomes one line on stderr and an exit status:
     2 bad input, 1 a failed run or other error, 128 + signal number when interrupted."""
-    from impedance_cosim.atomic import FolderBusyError
-    from impedance_cosim.fmu import FmuError
-    from impedance_cosim.interrupt import RunInterrupted
-    from impedance_cosim.master import MasterError
-    from impedance_cosim.ssp import SspError
-    from impedance_cosim.toolchains import CompileError
+    from impedance_cosim.cosim.fmu import FmuError
+    from impedance_cosim.cosim.master import MasterError
+    from impedance_cosim.cosim.ssp import SspError
+    from impedance_cosim.packaging.toolchains import CompileError
+    from impedance_cosim.util.atomic import FolderBusyError
+    from impedance_cosim.util.interrupt import RunInterrupted
 
     prefix = f"impedance-cosim {args.command}:"
     try:

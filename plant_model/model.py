@@ -15,11 +15,11 @@ import random
 from dataclasses import dataclass
 from typing import Any
 
-from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
 from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
-from impedance_cosim.ode import IntegrationError, euler_step, integrate
-from impedance_cosim.wall import WallParams, contact_event, contact_force_law, wall_force
+from impedance_cosim.physics.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
+from impedance_cosim.physics.ode import IntegrationError, euler_step, integrate
+from impedance_cosim.physics.wall import WallParams, contact_event, contact_force_law, wall_force
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.build import FMUS, NATIVE, build_fmu, build_native_fmu, build_ssp
-from impedance_cosim.linalg3 import matvec
+from impedance_cosim.packaging.build import FMUS, NATIVE, build_fmu, build_native_fmu, build_ssp
+from impedance_cosim.physics.linalg3 import matvec
 from plant_model.model import PlantModel
 
 DT = 1 / 400
@@ -73,7 +73,7 @@ def contact_torques(seconds: float, parameters: dict | None = None) -> list[tupl
 @pytest.fixture(scope="session")
 def fmi3_dir(fmu_dir: Path, native_dir: Path) -> Path:
     """The FMI 3.0 native FMUs (fmus/fmi3/) and PaperScenario-fmi3.ssp next to the others."""
-    from impedance_cosim.build3 import build_fmi3
+    from impedance_cosim.packaging.build3 import build_fmi3
 
     build_fmi3(fmu_dir)
     return fmu_dir / "fmi3"

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from impedance_cosim.arm import Arm, ArmParams, UnreachablePoseError
+from impedance_cosim.physics.arm import Arm, ArmParams, UnreachablePoseError
 
 ARM = Arm()
 RNG = np.random.default_rng(42)

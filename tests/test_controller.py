@@ -21,9 +21,9 @@ from controller_model.model import (
     virtual_trajectory,
     wrap_angle,
 )
-from impedance_cosim.arm import Arm, ArmParams
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.fmi.variables import UNITS, model_description
+from impedance_cosim.physics.arm import Arm, ArmParams
 
 ARM = Arm()
 TRAJ = TrajectoryParams()

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.build import FMUS, REPO, build_fmu, build_ssp
 from impedance_cosim.cli import main
-from impedance_cosim.dist import DATE, NAME, build_dist, bundle, expected_members
+from impedance_cosim.packaging.build import FMUS, REPO, build_fmu, build_ssp
+from impedance_cosim.packaging.dist import DATE, NAME, build_dist, bundle, expected_members
 
 ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu", "fmi3/*.fmu")
 

@@ -15,8 +15,8 @@ from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
 import impedance_cosim
-from impedance_cosim.build import REPO
-from impedance_cosim.documentation import documentation_members
+from impedance_cosim.packaging.build import REPO
+from impedance_cosim.packaging.documentation import documentation_members
 
 NS_ATTRS = ("author", "version", "copyright", "license")
 

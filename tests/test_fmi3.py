@@ -1,7 +1,7 @@
-"""The FMI 3.0 edition of the native FMUs (native/src/fmi3_glue.c, impedance_cosim/build3.py):
-standard compliance, the same interface as the FMI 2.0 FMUs, our master on the FMI 3 system
-archive equal to the FMI 2 run, fmpy simulate (Co-Simulation and Model Exchange), and the clocked
-controller under Scheduled Execution."""
+"""The FMI 3.0 edition of the native FMUs (native/src/fmi3_glue.c,
+impedance_cosim/packaging/build3.py): standard compliance, the same interface as the FMI 2.0 FMUs,
+our master on the FMI 3 system archive equal to the FMI 2 run, fmpy simulate (Co-Simulation and
+Model Exchange), and the clocked controller under Scheduled Execution."""
 
 from __future__ import annotations
 
@@ -19,13 +19,13 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3ScheduledExecution, FMU3Slave
 from fmpy.validation import validate_fmu
 
-from impedance_cosim import toolchains
-from impedance_cosim.analysis import read_csv
-from impedance_cosim.build3 import CLOCKED_NAME
-from impedance_cosim.master import Master
-from impedance_cosim.regression import REFERENCES, compare
-from impedance_cosim.ssp import read_ssp
-from impedance_cosim.system import CONNECTIONS
+from impedance_cosim.apps.analysis import read_csv
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.packaging import toolchains
+from impedance_cosim.packaging.build3 import CLOCKED_NAME
+from impedance_cosim.packaging.regression import REFERENCES, compare
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
@@ -342,7 +342,7 @@ def test_our_master_honours_the_clock(
     """Our master runs the clocked controller (ClockedInstance: a tick activation for every
     tick in each communication step): 8000 ticks over 20 s and the FMI 2.0 run bit for bit; at a
     1/200 s master step the clock still ticks 400 times per second (two per step)."""
-    from impedance_cosim import fmu3
+    from impedance_cosim.cosim import fmu3
 
     ticks: list[int] = []
     step = fmu3.ClockedInstance.step

@@ -9,10 +9,10 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.fmu import FmuError
-from impedance_cosim.fmu3 import FmuInstance3
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim.fmu import FmuError
+from impedance_cosim.cosim.fmu3 import FmuInstance3
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
 
 pytest.importorskip("pythonfmu3")
 

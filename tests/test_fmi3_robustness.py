@@ -16,10 +16,10 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 
-from impedance_cosim.build3 import CLOCKED_NAME
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
-from impedance_cosim.system import CONNECTIONS
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.packaging.build3 import CLOCKED_NAME
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from controller_model.model import ControllerModel
-from impedance_cosim.loop import run_models
-from impedance_cosim.master import Master, MasterError
-from impedance_cosim.ssp import SspError, read_ssp
-from impedance_cosim.system import source_files
+from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master import Master, MasterError
+from impedance_cosim.cosim.ssp import SspError, read_ssp
+from impedance_cosim.cosim.system import source_files
 
 DT = 1 / 400
 
@@ -39,8 +39,8 @@ def paper_run(ssp_path):
 
 
 def test_ssp_sources_are_generated_from_the_system_definition():
-    """ssp/*.ssd/ssv are the committed output of impedance_cosim.system (regenerate with
-    `python -m impedance_cosim.system`)."""
+    """ssp/*.ssd/ssv are the committed output of impedance_cosim.cosim.system (regenerate with
+    `python -m impedance_cosim.cosim.system`)."""
     folder = Path(__file__).resolve().parent.parent / "ssp"
     for name, content in source_files().items():
         assert (folder / name).read_bytes() == content, name

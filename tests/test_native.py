@@ -16,12 +16,12 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.analysis import read_csv
-from impedance_cosim.fmu import FmuError, FmuInstance
-from impedance_cosim.master import Master
-from impedance_cosim.regression import REFERENCES, compare
-from impedance_cosim.ssp import read_ssp
-from impedance_cosim.system import CONNECTIONS
+from impedance_cosim.apps.analysis import read_csv
+from impedance_cosim.cosim.fmu import FmuError, FmuInstance
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.packaging.regression import REFERENCES, compare
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 

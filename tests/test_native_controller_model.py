@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from controller_model.model import INPUT_START, VELOCITY_SOURCE, ControllerModel
+from impedance_cosim.cosim.loop import run_models
 from impedance_cosim.fmi.model import ModelError
-from impedance_cosim.loop import run_models
 
 ROOT = Path(__file__).resolve().parents[1]
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-ffp-contract=off", "-Wall", "-Wextra"]

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from conftest import DT, contact_torques
 
+from impedance_cosim.cosim.loop import run_models
 from impedance_cosim.fmi.model import ModelError
-from impedance_cosim.loop import run_models
 from plant_model.model import PlantModel
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")

@@ -14,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impedance_cosim.engines import EngineError, run_in_libcosim
+from impedance_cosim.cosim.engines import EngineError, run_in_libcosim
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.fmi.slave import ModelSlave
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
 from plant_model.model import PlantModel
 
 pytest.importorskip("libcosimpy")

@@ -20,9 +20,9 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim import toolchains
-from impedance_cosim.build import FMUS, build_native_fmu
-from impedance_cosim.system import CONNECTIONS
+from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.packaging import toolchains
+from impedance_cosim.packaging.build import FMUS, build_native_fmu
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 

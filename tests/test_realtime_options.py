@@ -8,11 +8,11 @@ import os
 
 import pytest
 
-from impedance_cosim import realtime
 from impedance_cosim.cli import main
-from impedance_cosim.master import Master
-from impedance_cosim.realtime import RealtimeOptions
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim import realtime
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.realtime import RealtimeOptions
+from impedance_cosim.cosim.ssp import read_ssp
 
 
 def test_pinning_is_applied_and_undone():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from impedance_cosim.regression import REFERENCES, compare, read_csv
+from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
 
 
 @pytest.mark.parametrize("path", list(REFERENCES), ids=lambda p: p.name)

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim import ssp
-from impedance_cosim.ssp import Limits, SspError, SystemDescription, read_ssp
+from impedance_cosim.cosim import ssp
+from impedance_cosim.cosim.ssp import Limits, SspError, SystemDescription, read_ssp
 
 SSD = "SystemStructure.ssd"
 PLANT = "resources/PumaPlant.fmu"

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impedance_cosim import fig4, linearize, stability
-from impedance_cosim.loop import loop_step
-from impedance_cosim.ode import integrate
-from impedance_cosim.stability_study import read_csv
+from impedance_cosim.apps import fig4, linearize, stability
+from impedance_cosim.apps.stability_study import read_csv
+from impedance_cosim.cosim.loop import loop_step
+from impedance_cosim.physics.ode import integrate
 
 REPO = Path(__file__).resolve().parent.parent
 DOCS = REPO / "docs"
@@ -143,8 +143,8 @@ def test_loop_map_state_is_complete(reference, algorithm):
 def test_linear_prediction_brackets_the_simulated_boundary(reference, native_ssp):
     """Sample-and-hold, true velocity: the linearised contact point predicts the critical rate,
     and the native co-simulation diverges 4 % below it and stays bounded 4 % above it."""
-    from impedance_cosim.master import Master
-    from impedance_cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master import Master
+    from impedance_cosim.cosim.ssp import read_ssp
 
     pred = linearize.critical_rate(
         lambda r: linearize.loop_radius(r, "gauss-seidel", "measured", reference=reference)[0],
@@ -252,7 +252,7 @@ def test_observer_pole_of_each_discretization(form, pole, kh):
     """Arm at rest, no gravity, friction, torque or force, angles unchanged: the observer's own
     dynamics are yhat_i = pole(K h) yhat_i-1 (quadratic Coriolis terms vanish for a tiny yhat)."""
     from controller_model.model import observer_update
-    from impedance_cosim.arm import Arm, ArmParams
+    from impedance_cosim.physics.arm import Arm, ArmParams
 
     arm = Arm(ArmParams(g=0.0, f1=0.0, f2=0.0, f3=0.0))
     q = (0.3, -1.2, 0.9)
@@ -267,7 +267,7 @@ def test_observer_pole_of_each_discretization(form, pole, kh):
 
 def test_a_parameter_the_system_lacks_is_an_error_before_any_run(monkeypatch, native_ssp):
     """Not a bracket of "unstable" runs: the study refuses to start."""
-    from impedance_cosim.master import MasterError
+    from impedance_cosim.cosim.master import MasterError
 
     case = stability.Case("rate", "observer", "gauss-seidel", "ideal")
     monkeypatch.setitem(stability.SENSORS, "ideal", {"plant.no_such_thing": 1.0})

@@ -8,10 +8,10 @@ import time
 import psutil
 import pytest
 
-from impedance_cosim import sweep
+from impedance_cosim.apps import sweep
 from impedance_cosim.cli import main
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
 
 
 @pytest.fixture(scope="module")

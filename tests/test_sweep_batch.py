@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impedance_cosim import sweep, sweep_batch
-from impedance_cosim.fmu_pool import InstancePool
-from impedance_cosim.master import Master
-from impedance_cosim.ssp import read_ssp
+from impedance_cosim.apps import sweep, sweep_batch
+from impedance_cosim.cosim.fmu_pool import InstancePool
+from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.ssp import read_ssp
 
 RUNS = [  # one after another on the same instances: each must equal a run on new instances
     {"overrides": {"plant.q_noise": 1e-4, "plant.noise_seed": 3}},

@@ -2,7 +2,7 @@
  * (eq. 10), sampled at sample_period with its outputs held between samples.
  *
  * A transcription of controller_model/model.py (and of Arm.forward_dynamics, jacobian_det and
- * friction in impedance_cosim/arm.py), operation for operation: the same temporaries, the same
+ * friction in impedance_cosim/physics/arm.py), operation for operation: the same temporaries, the same
  * order of terms and the same parenthesisation as Python's left-to-right evaluation, the same libm
  * calls, so that with -ffp-contract=off (no fused multiply-add) and without -ffast-math it computes
  * the same numbers as the Python FMU, bit for bit. Error messages are the Python ones, floats

@@ -1,5 +1,5 @@
 /* The master's stepping loop in C: the same Gauss-Seidel / Jacobi steps as the Python loop in
- * impedance_cosim/master.py, called through ctypes with the FMUs' own fmi2SetReal/fmi2DoStep/
+ * impedance_cosim/cosim/master.py, called through ctypes with the FMUs' own fmi2SetReal/fmi2DoStep/
  * fmi2GetReal function pointers, so a step costs the FMUs' time plus well under a microsecond.
  *
  * Rows: data is (n_steps + 1) x n_cols, column 0 the time, then every component's outputs in

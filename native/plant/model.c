@@ -1,5 +1,5 @@
 /* The native PumaPlant: plant_model/model.py (PlantModel) transcribed operation for operation,
- * with impedance_cosim/arm.py (inverse_kinematics, forward_dynamics) and impedance_cosim/wall.py,
+ * with impedance_cosim/physics/arm.py (inverse_kinematics, forward_dynamics) and impedance_cosim/physics/wall.py,
  * so that it computes the same numbers as the Python FMU, bit for bit.
  *
  * Each doStep integrates eq. (1) with the torque held, using adaptive Dormand-Prince 5(4)

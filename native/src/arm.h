@@ -1,5 +1,5 @@
 /* The hand-written part of the arm model shared by the native models, mirroring Arm in
- * impedance_cosim/arm.py operation for operation (the generated terms are in arm_terms.h). */
+ * impedance_cosim/physics/arm.py operation for operation (the generated terms are in arm_terms.h). */
 #ifndef ARM_H
 #define ARM_H
 

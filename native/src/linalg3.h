@@ -1,4 +1,4 @@
-/* Plain 3-vector / 3x3-matrix helpers, mirroring impedance_cosim/linalg3.py operation for
+/* Plain 3-vector / 3x3-matrix helpers, mirroring impedance_cosim/physics/linalg3.py operation for
  * operation (same evaluation order), so native and Python FMUs compute the same numbers.
  * Matrices are row-major double[9]. */
 #ifndef LINALG3_H

@@ -1,4 +1,4 @@
-/* See ode.h: a transcription of impedance_cosim/ode.py. Sums and products keep Python's
+/* See ode.h: a transcription of impedance_cosim/physics/ode.py. Sums and products keep Python's
  * left-to-right evaluation order; min/max keep Python's tie and NaN behaviour. */
 #include <math.h>
 #include <stdio.h>

@@ -1,5 +1,5 @@
 /* Adaptive Dormand-Prince 5(4) integration with event location, for a state of dimension
- * ODE_N = 6, mirroring impedance_cosim/ode.py operation for operation (same tableau constants,
+ * ODE_N = 6, mirroring impedance_cosim/physics/ode.py operation for operation (same tableau constants,
  * evaluation order, step-size control and event location) so the native plant computes the
  * same numbers as the Python one.
  *

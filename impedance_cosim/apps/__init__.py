@@ -1,0 +1,2 @@
+"""The applications on top of the runtime: run, hardware bridge and robot, sweeps, stability
+study, analysis and figures."""

@@ -1,0 +1,254 @@
+"""Results of a run: CSV output, the numbers of the summary, and the paper's figures (1-4).
+
+Signals are looked up by name in any mapping name -> array ("time", "plant.x", ...), so a
+RunResult, a dict from run_models or a CSV read back all work.
+
+Timing of sampled signals: the controller's outputs are recorded after each step, so the value
+in row j+1 was computed at the sample t_j and held over [t_j, t_j+1). `at_samples` moves them
+back to their sample time; comparisons with the plant's truth (observer error, tracking) use it.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from impedance_cosim.physics.arm import ArmParams
+
+Signals = Mapping[str, np.ndarray]
+TARGET_FORCE = 1e4 * 0.00196
+
+
+def write_csv(path: Path, names: list[str], data: np.ndarray) -> None:
+    """Results as CSV: a header of names ("time" first), each value the shortest text that reads
+    back exactly; readable by fmpy.util.read_csv, so fmpy's plotting works on it. Written to a
+    temporary file renamed into place (see results.py)."""
+    from impedance_cosim.cosim import results
+
+    results.write_csv(path, names, data)
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    """Columns of a results CSV, by name."""
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        names = [n.strip('"') for n in next(reader)]
+        rows = [[float(v) for v in row] for row in reader]
+    data = np.array(rows).reshape(len(rows), len(names))
+    return {n: data[:, k] for k, n in enumerate(names)}
+
+
+def at_samples(s: Signals, name: str) -> np.ndarray:
+    """A controller output at the sample times (row j+1 moved to row j; last row repeated)."""
+    v = s[name]
+    return np.append(v[1:], v[-1])
+
+
+def cartesian_velocity(s: Signals, prefix: str) -> np.ndarray:
+    """J(q) v for the joint-velocity signals prefix1..3 (e.g. "controller.qd_obs"), with the
+    plant's true angles (the figures compare estimates with the truth)."""
+    q = np.column_stack([s[f"plant.q{i}_true"] for i in (1, 2, 3)])
+    v = np.column_stack([at_samples(s, f"{prefix}{i}") for i in (1, 2, 3)])
+    return np.matmul(jacobians(ArmParams(), q), v[:, :, None])[:, :, 0]
+
+
+def jacobians(p: ArmParams, q: np.ndarray) -> np.ndarray:
+    """J(q) for every row of q (n x 3) at once: arm_terms.jacobian's expressions on arrays
+    (the per-row loop took half of a sweep run's time)."""
+    q1, q2, q3 = q.T
+    x0 = q1 + q2
+    x1 = q3 + x0
+    x2 = p.a3 * np.sin(x1)
+    x3 = p.a2 * np.sin(x0) + x2
+    x4 = p.a3 * np.cos(x1)
+    x5 = p.a2 * np.cos(x0) + x4
+    ones = np.ones_like(q1)
+    rows = [(-p.a1 * np.sin(q1) - x3, -x3, -x2), (p.a1 * np.cos(q1) + x5, x5, x4), (ones,) * 3]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def contact_phases(s: Signals) -> list[tuple[float, float]]:
+    """(start, end) times of the intervals with a contact force."""
+    t, touching = s["time"], s["plant.contact_force"] > 0
+    edges = np.flatnonzero(np.diff(touching.astype(int)))
+    starts = list(t[edges[np.diff(touching.astype(int))[edges] > 0] + 1])
+    ends = list(t[edges[np.diff(touching.astype(int))[edges] < 0]])
+    if touching[0]:
+        starts.insert(0, t[0])
+    if touching[-1]:
+        ends.append(t[-1])
+    return list(zip(starts, ends, strict=False))
+
+
+def summary(s: Signals) -> dict[str, Any]:
+    """The numbers that tell the paper's story (see README): contact force (impact peak, settled
+    value), tracking error before contact, observer error, peak torques."""
+    t = s["time"]
+    force = s["plant.contact_force"]
+    out: dict[str, Any] = {"duration_s": float(t[-1] - t[0])}
+    phases = contact_phases(s)
+    out["contact_phases_s"] = [(round(a, 4), round(b, 4)) for a, b in phases]
+    if phases:
+        a, b = phases[0]
+        out["impact_peak_N"] = float(force.max())
+        out["impact_peak_time_s"] = float(t[np.argmax(force)])
+        window = (t >= b - 0.6) & (t <= b - 0.1)
+        if window.any():
+            out["settled_force_N"] = float(force[window].mean())
+    ex, ey = at_samples(s, "controller.e_x"), at_samples(s, "controller.e_y")
+    first = phases[0][0] if phases else t[-1]
+    before = (t >= min(2.0, first)) & (t < first)
+    if before.any():
+        out["tracking_error_before_contact_m"] = float(np.hypot(ex, ey)[before].max())
+    obs = cartesian_velocity(s, "controller.qd_obs")
+    err = np.hypot(obs[:, 0] - s["plant.xd"], obs[:, 1] - s["plant.yd"])[:-1]
+    out["observer_error_max_m_s"] = float(err.max())
+    late = err[t[:-1] >= 2.0]
+    if late.size:
+        out["observer_error_rms_after_2s_m_s"] = float(np.sqrt(np.mean(late**2)))
+    out["peak_torque_N_m"] = [float(np.abs(s[f"controller.tau{i}"]).max()) for i in (1, 2, 3)]
+    return out
+
+
+def format_summary(values: dict[str, Any]) -> str:
+    """The summary as a few readable lines."""
+    lines = []
+    phases = values.get("contact_phases_s", [])
+    if phases:
+        text = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in phases)
+        lines.append(f"contact with the wall: {text}")
+        lines.append(
+            f"impact peak force: {values['impact_peak_N']:.1f} N at t = "
+            f"{values['impact_peak_time_s']:.2f} s"
+        )
+        if "settled_force_N" in values:
+            lines.append(
+                f"settled contact force: {values['settled_force_N']:.2f} N"
+                f" (target {TARGET_FORCE:.1f} N)"
+            )
+    else:
+        lines.append("no contact with the wall")
+    if "tracking_error_before_contact_m" in values:
+        lines.append(
+            "tracking error before contact (from 2 s): "
+            f"{1e3 * values['tracking_error_before_contact_m']:.2f} mm max"
+        )
+    text = f"observer error |J yhat - xdot|: {values['observer_error_max_m_s']:.4f} m/s max"
+    if "observer_error_rms_after_2s_m_s" in values:
+        text += f", {values['observer_error_rms_after_2s_m_s']:.5f} m/s rms after 2 s"
+    lines.append(text)
+    lines.append(
+        "peak joint torques: " + ", ".join(f"{v:.1f}" for v in values["peak_torque_N_m"]) + " N m"
+    )
+    return "\n".join(lines)
+
+
+# --- figures ----------------------------------------------------------------------------------
+
+
+def _axes(rows: int, cols: int, title: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 7.5), constrained_layout=True)
+    fig.suptitle(title)
+    return plt, fig, axes.ravel()
+
+
+def figure_1(s: Signals, path: Path) -> None:
+    """Fig. 1: (a) desired vs actual path, (b) contact detail, (c) joint torques, (d) force."""
+    plt, fig, ax = _axes(2, 2, "Fig. 1 - position and force tracking")
+    t = s["time"]
+    xv, yv = at_samples(s, "controller.x_v"), at_samples(s, "controller.y_v")
+    ax[0].plot(xv, yv, "k-", lw=1, label="virtual trajectory $x_v$")
+    ax[0].plot(s["plant.x"], s["plant.y"], "r--", lw=1, label="end effector")
+    ax[0].axvline(0.65, color="0.5", lw=2, label="wall")
+    ax[0].set(xlabel="x [m]", ylabel="y [m]", title="(a) desired vs actual position")
+    ax[0].set_aspect("equal", adjustable="datalim")
+    ax[0].legend(fontsize=8)
+    phases = contact_phases(s)
+    a, b = (phases[0][0] - 0.3, phases[0][1] + 0.3) if phases else (t[0], t[-1])
+    w = (t >= a) & (t <= b)
+    ax[1].step(t[w], xv[w], "k-", where="post", lw=1, label="virtual $x_v$")
+    ax[1].plot(t[w], s["plant.x"][w], "r--", lw=1, label="actual x")
+    ax[1].axhline(0.65, color="0.5", lw=2, label="wall")
+    ax[1].set(xlabel="t [s]", ylabel="x [m]", title="(b) displacement during the first contact")
+    ax[1].legend(fontsize=8)
+    for i, c in zip((1, 2, 3), ("C0", "C1", "C2"), strict=True):
+        ax[2].step(t, at_samples(s, f"controller.tau{i}"), where="post", color=c, lw=0.8,
+                   label=f"$\\tau_{i}$")  # fmt: skip
+    ax[2].set(xlabel="t [s]", ylabel="torque [N m]", title="(c) applied joint torques")
+    ax[2].legend(fontsize=8)
+    ax[3].plot(t, s["plant.contact_force"], "r-", lw=1, label="contact force")
+    ax[3].axhline(TARGET_FORCE, color="k", lw=0.8, ls=":", label="target 19.6 N")
+    ax[3].set(xlabel="t [s]", ylabel="force [N]", title="(d) desired vs actual contact force")
+    ax[3].legend(fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def figure_2(s: Signals, path: Path) -> None:
+    """Fig. 2: observed vs actual Cartesian velocity (a, b) and observer error (c, d)."""
+    plt, fig, ax = _axes(2, 2, "Fig. 2 - velocity observer (eq. 9)")
+    t = s["time"]
+    obs = cartesian_velocity(s, "controller.qd_obs")
+    for k, axis in enumerate("xy"):
+        actual = s[f"plant.{axis}d"]
+        ax[k].plot(t, actual, "k-", lw=1, label="actual")
+        ax[k].plot(t[:-1], obs[:-1, k], "r--", lw=1, label="observed")
+        ax[k].set(xlabel="t [s]", ylabel=f"{axis}-velocity [m/s]",
+                  title=f"({'ab'[k]}) actual vs observed {axis}-velocity")  # fmt: skip
+        ax[k].legend(fontsize=8)
+        ax[k + 2].plot(t[:-1], obs[:-1, k] - actual[:-1], "b-", lw=0.8)
+        ax[k + 2].set(xlabel="t [s]", ylabel="error [m/s]",
+                      title=f"({'cd'[k]}) observer error, {axis}-direction")  # fmt: skip
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def figure_3(s: Signals, path: Path) -> None:
+    """Fig. 3: desired vs actual velocity (a, b) and velocity tracking error (c, d)."""
+    plt, fig, ax = _axes(2, 2, "Fig. 3 - velocity tracking")
+    t = s["time"]
+    for k, axis in enumerate("xy"):
+        desired = at_samples(s, f"controller.{axis}d_v")
+        actual = s[f"plant.{axis}d"]
+        ax[k].plot(t, desired, "k-", lw=1, label="desired (virtual)")
+        ax[k].plot(t, actual, "r--", lw=1, label="actual")
+        ax[k].set(xlabel="t [s]", ylabel=f"{axis}-velocity [m/s]",
+                  title=f"({'ab'[k]}) desired vs actual {axis}-velocity")  # fmt: skip
+        ax[k].legend(fontsize=8)
+        ax[k + 2].plot(t[:-1], (actual - desired)[:-1], "b-", lw=0.8)
+        ax[k + 2].set(xlabel="t [s]", ylabel="error [m/s]",
+                      title=f"({'cd'[k]}) velocity tracking error, {axis}-direction")  # fmt: skip
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def figure_4(observer_run: Signals, difference_run: Signals, path: Path) -> None:
+    """Fig. 4: x-velocity with the observer in the loop (a) vs with numerical differentiation in
+    the loop (b), over the whole run and over 0.25 s from the first contact."""
+    plt, fig, ax = _axes(2, 2, "Fig. 4 - observer vs numerical differentiation in the loop")
+    runs = ((observer_run, "controller.qd_obs", "observed"),
+            (difference_run, "controller.qd_diff", "numerical differentiation"))  # fmt: skip
+    for k, (s, prefix, label) in enumerate(runs):
+        t = s["time"]
+        est = cartesian_velocity(s, prefix)[:-1, 0]
+        phases = contact_phases(s)
+        a, zoom = (phases[0][0], "the first 0.25 s of contact") if phases else (
+            max(t[0], t[-1] - 0.25), "the last 0.25 s (no contact)")  # fmt: skip
+        for j, w in enumerate((t[:-1] >= t[0], (t[:-1] >= a) & (t[:-1] <= a + 0.25))):
+            axis = ax[2 * j + k]
+            axis.plot(t[:-1][w], s["plant.xd"][:-1][w], "k-", lw=1, label="actual")
+            axis.plot(t[:-1][w], est[w], "r--", lw=0.8, label=label)
+            title = f"({'ab'[k]}) actual vs {label}" if j == 0 else zoom
+            axis.set(xlabel="t [s]", ylabel="x-velocity [m/s]", title=title)
+            axis.legend(fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,159 @@
+"""Sweeps that scale for fast runs: several runs per dask task, FMU instances reused in a worker.
+
+A 20 s run of the native FMUs takes ~40 ms; one dask task per run spent a large part of that on
+task overhead. Here each task runs a batch of points (run_batch) sized from the cost measured so
+far: the runs' wall time per master step, aiming at `target_s` per task (a few hundred ms), and
+smaller towards the end so that no worker idles while another finishes a long batch (guided
+self-scheduling). At most two batches per worker are in flight, so sizes follow the measurements.
+Each worker keeps its FMU instances between runs (fmu_pool: fmi2Reset instead of a new
+instance). Rows are recorded as their batch finishes (Ctrl-C keeps every finished batch); a batch
+whose task failed (e.g. its worker died) is run again one point per task, so a crashing point
+costs only its own row; runs that dask cancelled are lost (RunsLostError)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+
+from impedance_cosim.cosim.fmu_pool import InstancePool
+
+TARGET_S = 0.3  # aimed wall time of one task
+IN_FLIGHT = 2  # batches submitted per worker
+
+POOL = InstancePool()  # per worker process: FMU instances reused across runs
+
+
+def run_batch(payload: bytes | str, digest: str, points: Sequence[dict], options: dict) -> list:
+    """The sweep rows of several points, one after another in this process (on a worker), with
+    its FMU instances reused from run to run."""
+    from impedance_cosim.apps.sweep import run_point
+
+    return [run_point(payload, digest, p, options, instances=POOL) for p in points]
+
+
+def steps(point: dict, options: dict) -> float:
+    """The master steps of a run (relative, for sizing batches: stop / step, 1 where unset)."""
+    from impedance_cosim.apps.sweep import master_arguments
+
+    args = master_arguments(point, options)
+    return (args["stop_time"] or 1.0) / (args["step_size"] or 1.0)
+
+
+class Batcher:
+    """Cuts the remaining points into batches of about `target_s` each (see module docstring)."""
+
+    def __init__(self, costs: dict[int, float], workers: int, target_s: float = TARGET_S):
+        self.costs, self.workers, self.target_s = costs, max(1, workers), target_s
+        self.todo = list(costs)  # indices, plan order
+        self.seconds = self.units = 0.0  # measured: run wall time and their costs
+
+    def measured(self, index: int, wall_s: float | None) -> None:
+        if wall_s is not None and math.isfinite(wall_s):
+            self.seconds += wall_s
+            self.units += self.costs[index]
+
+    def next(self) -> list[int]:
+        """The next batch (empty when none is left): one point until a run has been timed."""
+        if not self.todo:
+            return []
+        if not self.units:
+            size = 1
+        else:
+            per_unit = self.seconds / self.units
+            left = sum(self.costs[i] for i in self.todo)
+            budget = min(self.target_s / per_unit, left / (2 * self.workers))
+            size, total = 0, 0.0
+            for i in self.todo:
+                if size and total + self.costs[i] > budget:
+                    break
+                size, total = size + 1, total + self.costs[i]
+        batch, self.todo = self.todo[:size], self.todo[size:]
+        return batch
+
+
+def _failed_row(point: dict, exc: BaseException) -> dict[str, Any]:
+    from impedance_cosim.apps.sweep import METRICS
+
+    row = dict(point)
+    reason = " ".join(str(exc).split())
+    row.update(status="failed", error=f"task failed: {type(exc).__name__}: {reason}")
+    row.update({m: None for m in METRICS}, wall_s=None)
+    return row
+
+
+def run_dask(
+    plan: Any,
+    client: Any,
+    progress: Callable[[int, dict], None] | None = None,
+    indices: Iterable[int] | None = None,
+    record: Callable[[int, dict], None] | None = None,
+    target_s: float = TARGET_S,
+) -> list[dict]:
+    """The plan's runs (or those at `indices`) in batches on the client's workers; rows in the
+    plan's order; `record(index, row)` for every row of a batch as the batch finishes. On an
+    exception (e.g. Ctrl-C) the batches not yet finished are cancelled."""
+    from concurrent.futures import CancelledError
+
+    from distributed import as_completed
+
+    from impedance_cosim.apps.sweep import (
+        RunInterruptedError,
+        RunsLostError,
+        _payload,
+        prepare_worker,
+    )
+
+    order = list(range(len(plan.points)) if indices is None else indices)
+    data, digest = _payload(plan.ssp)
+    payload = client.scatter(data, broadcast=True, hash=False)
+    client.run(prepare_worker, data, digest)  # every worker prepares the system once
+    workers = len(client.scheduler_info().get("workers", {})) or 1
+    batcher = Batcher({i: steps(plan.points[i], plan.options) for i in order}, workers, target_s)
+    singles: list[int] = []  # points of failed batches, run again one per task
+    batches: dict[str, tuple[Any, list[int]]] = {}  # task key -> (future, its points)
+    pending = as_completed()
+    rows: dict[int, dict] = {}
+    lost: str | None = None  # dask cancelled a batch: submit no more
+
+    def submit() -> None:
+        batch = [singles.pop(0)] if singles else batcher.next()
+        if batch and lost is None:
+            points = [plan.points[i] for i in batch]
+            future = client.submit(run_batch, payload, digest, points, plan.options, pure=False)
+            batches[future.key] = (future, batch)
+            pending.add(future)
+
+    try:
+        for _ in range(IN_FLIGHT * workers):
+            submit()
+        for future in pending:
+            batch = batches.pop(future.key)[1]
+            try:
+                results = future.result()
+            except RunInterruptedError:  # a worker's run was stopped by a signal: stop the sweep
+                raise
+            except CancelledError as exc:  # e.g. the scheduler went away: not the points' fault
+                lost = lost or " ".join(str(exc).split())
+                continue
+            except Exception as exc:  # the worker died (e.g. a crash inside an FMU)
+                if len(batch) > 1:
+                    singles.extend(batch)
+                    submit()
+                    continue
+                results = [_failed_row(plan.points[batch[0]], exc)]
+            for i, row in zip(batch, results, strict=True):
+                rows[i] = row
+                batcher.measured(i, row.get("wall_s"))
+                if record:
+                    record(i, row)
+                if progress:
+                    progress(len(rows), row)
+            submit()
+    finally:
+        if batches:
+            client.cancel([f for f, _ in batches.values() if not f.done()])
+    if lost is not None or len(rows) < len(order):
+        missing = len(order) - len(rows)
+        raise RunsLostError(f"dask lost {missing} of {len(order)} runs ({lost or 'not run'})")
+    return [rows[i] for i in order]

@@ -1,0 +1,298 @@
+"""`impedance-cosim sweep`: its options, the checks before any work, the run with every finished
+row written to the table at once, and Ctrl-C/SIGTERM: the sweep stops (a run under way is
+dropped), the table keeps every finished run, one line says how far it got and how to resume
+(--resume), exit status 128 + signal (130 for Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import difflib
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from impedance_cosim.apps import sweep
+from impedance_cosim.apps.sweep import (
+    DEFAULT_PLOTS,
+    DEFAULT_SSP,
+    MAX_RUNS,
+    METRICS,
+    STUDY,
+    ProgressBar,
+    RunInterruptedError,
+    RunsLostError,
+    SweepError,
+    _label,
+    check_scheduler,
+    dask_client,
+    known_parameters,
+    parse_axis,
+    plan_sweep,
+    plot_map,
+    run_plan,
+    run_study,
+    sweep_table,
+)
+from impedance_cosim.cosim.master import ALGORITHMS
+
+
+def add_parser(sub) -> None:
+    """Register `impedance-cosim sweep`."""
+    p = sub.add_parser(
+        "sweep",
+        help="parameter sweep on dask: metrics table (CSV) and maps (PNG)",
+        description="Run a grid (or seeded random sample) of co-simulations, one dask task per "
+        "run, and write one table of metrics plus maps. Parameters: component.variable (vector "
+        "shorthand controller.K = K1..K3), aliases and system.* pseudo-parameters "
+        "(--list-parameters).",
+    )
+    p.add_argument(
+        "--grid",
+        action="append",
+        metavar="NAME=VALUES",
+        default=[],
+        help="a swept parameter: v1,v2,... or lin:START:STOP:N or log:START:STOP:N; "
+        "with --random also range:LOW:HIGH or logrange:LOW:HIGH (repeatable)",
+    )
+    p.add_argument(
+        "--random",
+        type=int,
+        default=None,
+        metavar="N",
+        help="N seeded random points instead of the full grid",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of --random (default 0)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a fixed parameter for every run (repeatable)",
+    )
+    p.add_argument(
+        "--ssp",
+        default=None,
+        help=f"system archive (default {DEFAULT_SSP.name}: the "
+        "native FMUs, built if missing or out of date)",
+    )
+    p.add_argument("--scenario", default=None, help="parameter set (default: the SSD's first)")
+    p.add_argument("--algorithm", choices=ALGORITHMS, default=None)
+    p.add_argument("--stop", type=float, default=None, help="stop time [s] (default 20)")
+    p.add_argument("--step", type=float, default=None, help="communication step [s] (1/400)")
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="an existing dask scheduler (tcp://host:8786); default: a LocalCluster",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="LocalCluster worker processes (default: this machine's cores)",
+    )
+    p.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=3.0,
+        help="seconds to reach the scheduler (default 3)",
+    )
+    p.add_argument("--serial", action="store_true", help="no dask: the runs in this process")
+    p.add_argument("--out", default="results/sweep", help="output folder (default results/sweep)")
+    p.add_argument(
+        "--plot",
+        action="append",
+        default=None,
+        metavar="METRIC",
+        help=f"metric to map (repeatable; default {', '.join(DEFAULT_PLOTS)})",
+    )
+    p.add_argument("--no-plots", action="store_true", help="only the table")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--study",
+        nargs="*",
+        choices=list(STUDY),
+        default=None,
+        metavar="MAP",
+        help=f"run the stability study's maps ({', '.join(STUDY)}; default all): "
+        "map_<name>.csv/.png into --out",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="finish an interrupted sweep: keep the finished runs of the table in --out (same "
+        "command otherwise) and run only the others",
+    )
+    p.add_argument("--list-parameters", action="store_true", help="list the sweepable names")
+    p.set_defaults(func=_cmd_sweep)
+
+
+def _default_ssp() -> Path:
+    from impedance_cosim.cli import _stale
+
+    if _stale(DEFAULT_SSP):
+        from impedance_cosim.packaging.build import build_all
+
+        print("building the FMUs and the system archives ...", file=sys.stderr)
+        build_all(DEFAULT_SSP.parent, None)
+    return DEFAULT_SSP
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """While active (main thread only), SIGINT and SIGTERM set sweep.STOP and raise
+    KeyboardInterrupt, so every with-block (table, cluster) closes on the way out."""
+    sweep.STOP["signal"] = None
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handle(signum: int, _frame: object) -> None:
+        sweep.STOP["signal"] = sweep.STOP["signal"] or signal.Signals(signum).name
+        raise KeyboardInterrupt
+
+    names = [s for s in ("SIGINT", "SIGTERM") if hasattr(signal, s)]
+    previous = {s: signal.signal(getattr(signal, s), handle) for s in names}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(getattr(signal, s), handler if handler is not None else signal.SIG_DFL)
+        sweep.STOP["signal"] = None
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """SweepError for an option value that cannot work, before anything is read or started."""
+    if args.workers is not None and args.workers < 1:
+        raise SweepError(f"--workers must be >= 1 (got {args.workers})")
+    if args.scheduler and args.workers:
+        raise SweepError("--workers is for the LocalCluster; a --scheduler has its own workers")
+    if not (math.isfinite(args.connect_timeout) and 0 < args.connect_timeout <= 600):
+        raise SweepError(f"--connect-timeout must be 0..600 s (got {args.connect_timeout})")
+    for name in ("stop", "step"):
+        value = getattr(args, name)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise SweepError(f"--{name} must be a finite number > 0 (got {value})")
+    if args.random is not None and not 1 <= args.random <= MAX_RUNS:
+        raise SweepError(f"--random must be 1..{MAX_RUNS} runs (got {args.random})")
+    for metric in args.plot or []:
+        if metric not in METRICS:
+            close = difflib.get_close_matches(metric, METRICS, n=3)
+            raise SweepError(
+                f"unknown metric {metric!r} (have {', '.join(METRICS)})"
+                + (f"; did you mean {', '.join(close)}?" if close else "")
+            )
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise SweepError(f"--out {out} is a file, not a folder")
+    runs = 1
+    for item in args.grid:
+        _name, values = parse_axis(item, max_count=MAX_RUNS)  # before the archive is read or built
+        runs *= len(values) if isinstance(values, list) else 1
+    if args.random is None and runs > MAX_RUNS:
+        raise SweepError(f"the grid has {runs:.3g} runs, more than {MAX_RUNS}: fewer values")
+
+
+def _kept(tables: list) -> str:
+    """How far the sweep got and how to finish it."""
+    finished = sum(len(t.done) for t in tables)
+    total = sum(len(t.points) for t in tables)
+    where = ", ".join(str(t.path) for t in tables)
+    return (
+        f"{finished} of {total} runs finished, kept in {where}; to finish, run the same command "
+        "with --resume"
+    )
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    _check_options(args)
+    tables: list = []  # the tables opened so far (for the line on an interruption)
+    with stop_on_signals():
+        try:
+            return _sweep(args, tables)
+        except RunsLostError as exc:
+            print(f"impedance-cosim sweep: error: {exc}; {_kept(tables)}", file=sys.stderr)
+            return 1
+        except (KeyboardInterrupt, RunInterruptedError) as exc:
+            signum = getattr(exc, "signum", None)  # the master's own interruption carries it
+            name = sweep.STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
+            news = _kept(tables) if tables else "before any run started"
+            lead = "\n" if sys.stderr.isatty() else ""
+            print(f"{lead}impedance-cosim sweep: interrupted by {name}: {news}", file=sys.stderr)
+            return 128 + getattr(signal, name, signal.SIGINT)
+
+
+def _sweep(args: argparse.Namespace, tables: list) -> int:
+    if args.scheduler:  # before anything else: fail fast
+        check_scheduler(args.scheduler, args.connect_timeout)
+    ssp = Path(args.ssp) if args.ssp else None
+    if args.list_parameters:
+        from impedance_cosim.cosim.ssp import read_ssp
+
+        for name, text in known_parameters(read_ssp(ssp or _default_ssp())).items():
+            print(f"{name:28} {text}")
+        return 0
+    progress = sys.stderr.isatty() and not args.no_progress
+    out = Path(args.out)
+
+    def client():
+        return dask_client(args.scheduler, args.workers, args.connect_timeout)
+
+    factory = None if args.serial else client
+    if args.study is not None:
+        if args.grid or args.random is not None:
+            raise SweepError("--study runs its own grids: give it no --grid/--random")
+        names = args.study or list(STUDY)
+        ssp = ssp or _default_ssp()
+        started = time.perf_counter()
+        written = run_study(names, out, ssp, factory, progress, args.stop, args.resume, tables)
+        print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
+        for path in written:
+            print(f"  {path}")
+        return 0
+    if not args.grid:
+        raise SweepError("nothing to sweep: give at least one --grid component.variable=values")
+    plan = plan_sweep(
+        args.grid,
+        ssp=ssp or _default_ssp(),
+        random_runs=args.random,
+        seed=args.seed,
+        fixed=args.set,
+        scenario=args.scenario,
+        algorithm=args.algorithm,
+        stop=args.stop,
+        step=args.step,
+    )
+    path = out / "sweep.csv"
+    started = time.perf_counter()
+    with sweep_table(path, plan, args.resume) as table:
+        tables.append(table)
+        kept = len(table.done)
+        bar = ProgressBar(len(plan.points) - kept, progress)
+        idle = len(table.done) == len(plan.points) or not factory
+        with contextlib.nullcontext() if idle else factory() as c:
+            rows = run_plan(plan, table, c, bar)
+    elapsed = time.perf_counter() - started
+    bad = [r for r in rows if r["status"] != "ok"]
+    resumed = f" ({kept} kept from the table)" if args.resume else ""
+    print(
+        f"{len(rows)} runs in {elapsed:.1f} s{resumed}, {len(rows) - len(bad)} bounded, "
+        f"{len(bad)} not -> {path}"
+    )
+    for r in bad[:10]:
+        where = ", ".join(f"{k}={_label(r[k])}" for k in plan.axes)
+        print(f"  {where}: {r['status']}: {r['error']}")
+    if len(bad) > 10:
+        print(f"  ... and {len(bad) - 10} more (see the table)")
+    if not args.no_plots:
+        for metric in args.plot or DEFAULT_PLOTS:
+            png = out / f"sweep_{metric}.png"
+            plot_map(rows, list(plan.axes), metric, png, mode=plan.mode)
+            print(f"  {png}")
+    return 0

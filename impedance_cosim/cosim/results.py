@@ -1,0 +1,106 @@
+"""Results CSV written as a run goes: rows are appended to a temporary file beside the target
+and flushed after every block; closing the stream (also on an exception or an interruption)
+renames it into place, so the CSV at the target name is always whole, and holds every row
+computed before the run stopped.
+
+Format: a header of names ("time" first), then one row per line, each value the shortest text
+that reads back to the same double (Python's repr). fmpy.util.read_csv reads it."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from impedance_cosim.util import atomic
+
+MAX_RESULT_BYTES = 2**30  # the recorded rows of one run must fit in this (refused before running)
+Sink = Callable[[list[str], np.ndarray], None]  # (column names, new rows), see Master.run
+
+
+def size_problem(steps: int, columns: int, stop: float, step: float) -> str | None:
+    """Why a run's recorded rows would not fit in MAX_RESULT_BYTES, or None."""
+    need = (steps + 1) * columns * 8
+    if need <= MAX_RESULT_BYTES:
+        return None
+    return (
+        f"stop time {stop:g} s at step {step:g} s is {steps:.3g} steps, whose results ({columns}"
+        f" columns) would take {need / 2**30:.3g} GiB of memory (limit"
+        f" {MAX_RESULT_BYTES / 2**30:g} GiB): use a shorter run or a longer step"
+    )
+
+
+class Feed:
+    """Gives a sink the rows of a run it has not had yet: the header (no rows) on the first call,
+    then data[written:rows] (with the extra columns beside, if any) on each later one."""
+
+    def __init__(self, sink: Sink | None, names: list[str]) -> None:
+        self.sink, self.names, self.written = sink, names, -1
+
+    def __call__(self, data: np.ndarray, rows: int, extra: np.ndarray | None = None) -> None:
+        if self.sink is None or rows == self.written:
+            return
+        first, self.written = max(self.written, 0), rows
+        block = data[first:rows]
+        if extra is not None:
+            block = np.hstack((block, extra[first:rows]))
+        self.sink(self.names, block)
+
+
+def format_rows(data: np.ndarray) -> str:
+    """Rows as CSV lines (repr of each value: exact round trip)."""
+    return "".join(",".join(map(repr, row)) + "\n" for row in data.tolist())
+
+
+class CsvStream:
+    """A results CSV appended block by block (see module docstring). Use as a context manager;
+    `write(names, rows)` is the sink the master calls."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.names: list[str] | None = None
+        self.rows = 0
+        self._tmp = atomic.temp_path(self.path)
+        self._file = open(self._tmp, "w", newline="")  # noqa: SIM115 (closed in close())
+
+    def write(self, names: list[str], rows: np.ndarray) -> None:
+        """Append rows (an array with one column per name); the first call writes the header."""
+        if self.names is None:
+            self.names = list(names)
+            self._file.write(",".join(_quote(n) for n in self.names) + "\n")
+        elif list(names) != self.names:
+            raise ValueError(f"{self.path.name}: columns changed during the run")
+        if len(rows):
+            self._file.write(format_rows(np.asarray(rows, dtype=float)))
+            self.rows += len(rows)
+        self._file.flush()
+
+    def close(self) -> None:
+        """Rename the rows written so far into place (nothing at all if no header was written)."""
+        if self._file is None:
+            return
+        self._file.close()
+        self._file = None
+        if self.names is None:
+            atomic.discard(self._tmp)
+        else:
+            atomic.replace(self._tmp, self.path)
+
+    def __enter__(self) -> CsvStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def write_csv(path: str | Path, names: list[str], data: np.ndarray) -> None:
+    """A whole results table at once, through a temporary file renamed into place."""
+    with CsvStream(path) as stream:
+        stream.write(names, data)
+
+
+def _quote(name: str) -> str:
+    if any(c in name for c in ',"\r\n'):
+        return '"' + name.replace('"', '""') + '"'
+    return name

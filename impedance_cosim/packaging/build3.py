@@ -1,0 +1,185 @@
+"""Build the FMI 3.0 edition of the native FMUs into fmus/fmi3/, and its system archive.
+
+The same model code (native/<model>/model.c, config.h) and the same variable tables as the FMI 2.0
+native FMUs; the glue is native/src/fmi3_glue.c, which includes the FMI 2 layer (fmi2_glue.c,
+fmi2_me.c) under internal names. The FMUs:
+- PumaPlant.fmu: Co-Simulation and Model Exchange;
+- ImpedanceController.fmu: Co-Simulation (and Model Exchange), no clock: for any FMI 3 host;
+- ImpedanceControllerClocked.fmu: Scheduled Execution, its sampling as a periodic input clock
+  (`sample_clock`, interval = the parameter sample_period), for hosts that schedule clocks;
+- python/PumaPlant.fmu, python/ImpedanceController.fmu: the Python FMUs as FMI 3.0 (pythonfmu3,
+  Co-Simulation), when pythonfmu3 is installed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import tempfile
+import uuid
+import zipfile
+from pathlib import Path
+
+import impedance_cosim
+from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
+from impedance_cosim.packaging.build import (
+    DEFAULT_OUT,
+    FMUS,
+    NATIVE,
+    FmuSpec,
+    _add_documentation,
+    _build_description,
+    _info,
+    _native_sources,
+    build_ssp,
+    pack_native_fmu,
+)
+from impedance_cosim.util.atomic import temp_path
+
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_GLUE = ("fmi3_glue.c", "fmi3_events.c", "fmi3_stubs.c", "fmi3_wrapper.h", "fmi2_hidden.h")
+# compiled into the FMI 3 binary by inclusion from fmi3_glue.c, not on their own
+INCLUDED = ("fmi2_glue.c", "fmi2_me.c")
+SAMPLE_CLOCK = SampleClock(
+    "sample_clock",
+    "sample_period",
+    "The controller's sampling: periodic, one tick every sample_period seconds from the start"
+    " time; at each tick the observer and the control law take a sample of the inputs",
+)
+CLOCKED_NAME = "ImpedanceControllerClocked"  # file name of the clocked controller
+# models whose co-simulation returns early at a discrete-state switch when the importer allows it
+# (model.c implements model_step_early): the plant, at the wall contact
+EARLY_RETURN = {"plant"}
+
+
+def _xml(cls, token: str, clock: SampleClock | None, early: bool) -> bytes:
+    return model_description3(
+        model_name=cls.MODEL_NAME,
+        description=cls.DESCRIPTION,
+        token=token,
+        variables=cls.variables(),
+        default_experiment=cls.DEFAULT_EXPERIMENT,
+        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (native C99, FMI 3.0)",
+        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+        model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
+        clock=clock,
+        early_return=early,
+    )
+
+
+def build_native_fmu3(
+    spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3", clock: SampleClock | None = None
+) -> Path:
+    """Build the FMI 3.0 native FMU of a model (with clock: its Scheduled Execution variant)."""
+    import fmpy
+
+    cls = spec.load_model_class()
+    me = getattr(cls, "MODEL_EXCHANGE", None)
+    early = spec.key in EARLY_RETURN and clock is None
+    sources = _native_sources(spec)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    for name in FMI3_HEADERS:
+        sources[name] = (headers / name).read_bytes()
+    for name in FMI3_GLUE:
+        sources[name] = (NATIVE / "src" / name).read_bytes()
+    n_table = len(full_table(cls.variables(), me))
+    sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables(), early).encode()
+    c_files = sorted(n for n in sources if n.endswith(".c") and n not in INCLUDED)
+    digest = hashlib.sha256(_xml(cls, "", clock, early))
+    for name in sorted(sources):
+        digest.update(name.encode() + sources[name])
+    token = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
+    sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
+    sources["buildDescription.xml"] = _build_description(cls.MODEL_NAME, c_files, "3.0")
+    target = Path(out_dir) / f"{CLOCKED_NAME if clock else cls.MODEL_NAME}.fmu"
+    xml = _xml(cls, token, clock, early)
+    return pack_native_fmu(target, xml, sources, c_files, cls.MODEL_NAME, fmi_version=3)
+
+
+SCRIPT3 = '''"""pythonfmu3 slave script of {name} as FMI 3.0: a thin shell over {cls}."""
+
+from pythonfmu3 import Fmi3Slave
+
+from impedance_cosim.fmi.slave3 import ModelSlave3
+from {module} import {cls}
+
+
+class {name}3(ModelSlave3, Fmi3Slave):
+    model_class = {cls}
+'''
+
+
+def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "python") -> Path:
+    """The Python FMU of a model as FMI 3.0 (pythonfmu3): the same model package and glue mixin
+    as the FMI 2.0 one, a generated slave script (module <name>3, so it never shares a module
+    name with the FMI 2.0 slave), and the modelDescription.xml replaced by ours."""
+    from pythonfmu3 import FmuBuilder  # build-time dependency only
+
+    cls = spec.load_model_class()
+    module, cls_name = spec.model_class.rsplit(".", 1)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="impcosim_py3_") as tmp:
+        stage = Path(tmp) / "stage"
+        _stage_python(spec, stage)
+        script = Path(tmp) / f"{cls.MODEL_NAME}3.py"
+        script.write_text(SCRIPT3.format(name=cls.MODEL_NAME, cls=cls_name, module=module))
+        project = [stage / "impedance_cosim", stage / spec.package]
+        raw = FmuBuilder.build_FMU(script, dest=Path(tmp) / "raw", project_files=project)
+        with zipfile.ZipFile(raw) as zin:
+            members = sorted(n for n in zin.namelist() if n != "modelDescription.xml")
+            contents = {n: zin.read(n) for n in members}
+    digest = hashlib.sha256(_xml_python(cls, ""))
+    for name in members:
+        digest.update(name.encode() + contents[name])
+    xml = _xml_python(cls, "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}")
+    target = out_dir / f"{cls.MODEL_NAME}.fmu"
+    tmp_target = temp_path(target)
+    with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(_info("modelDescription.xml"), xml)
+        for name in members:
+            z.writestr(
+                _info(name, 0o755 if name.startswith("binaries/") else 0o644), contents[name]
+            )
+        _add_documentation(z, xml, "pythonfmu3")
+    tmp_target.replace(target)
+    return target
+
+
+def _stage_python(spec: FmuSpec, stage: Path) -> None:
+    """What the Python FMU bundles: the core of impedance_cosim and the model package."""
+    from impedance_cosim.packaging.build import REPO, _stage, stage_core
+
+    stage_core(stage)
+    _stage(REPO / spec.package, stage / spec.package, skip={spec.script})
+
+
+def _xml_python(cls, token: str) -> bytes:
+    return model_description3(
+        model_name=cls.MODEL_NAME,
+        description=cls.DESCRIPTION,
+        token=token,
+        variables=cls.variables(),
+        default_experiment=cls.DEFAULT_EXPERIMENT,
+        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (pythonfmu3, FMI 3.0)",
+        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+    )
+
+
+def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
+    """fmus/fmi3/: the FMI 3.0 plant and controllers, and PaperScenario-fmi3.ssp (the SSD of the
+    FMI 2.0 archive, with the FMI 3.0 plant and clock-free controller)."""
+    folder = Path(out_dir) / "fmi3"
+    built = [
+        build_native_fmu3(FMUS["plant"], folder),
+        build_native_fmu3(FMUS["controller"], folder),
+        build_native_fmu3(FMUS["controller"], folder, SAMPLE_CLOCK),
+    ]
+    built.append(build_ssp(out_dir, "PaperScenario-fmi3", folder))
+    try:
+        import pythonfmu3  # noqa: F401
+    except ImportError:
+        print("note: pythonfmu3 not installed: no FMI 3.0 Python FMUs", file=sys.stderr)
+        return built
+    built += [build_python_fmu3(FMUS[k], folder / "python") for k in ("plant", "controller")]
+    return built

@@ -1,0 +1,174 @@
+"""The distribution bundle (`impedance-cosim dist`): what a user downloads, one zip.
+
+It holds every FMU (Python and native, every platform they carry), both system archives, the
+reference results (*_ref.csv), the licence, a generated README and SHA256SUMS. It is
+reproducible: the FMUs and system archives are built with fixed dates and modes, and the bundle
+itself has sorted members, one fixed date and one fixed mode, so building twice gives the same
+bytes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import tempfile
+import textwrap
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+from impedance_cosim import __version__
+from impedance_cosim.packaging.build import DEFAULT_OUT, FMUS, NATIVE, REPO, build_all
+
+DATE = (2020, 1, 1, 0, 0, 0)  # the date of every member (zip cannot store times before 1980)
+NAME = f"impedance-cosim-{__version__}"
+
+
+def reference_results() -> list[Path]:
+    """The reference results kept in the repository (see impedance_cosim.packaging.regression)."""
+    from impedance_cosim.packaging.regression import REFERENCES
+
+    return sorted(REFERENCES, key=lambda p: p.name)
+
+
+def build_dist(dist_dir: Path, out_dir: Path = DEFAULT_OUT) -> Path:
+    """Build every FMU and system archive into out_dir, then bundle them into
+    dist_dir/impedance-cosim-<version>.zip; return the bundle's path."""
+    Path(dist_dir).mkdir(parents=True, exist_ok=True)  # fail before building, not after
+    try:
+        built = build_all(Path(out_dir))
+    except RuntimeError as exc:  # a failed compile: one message, no traceback
+        raise ValueError(str(exc)) from None
+    return bundle(built, Path(out_dir), Path(dist_dir))
+
+
+def expected_members() -> list[str]:
+    """The archives a complete bundle must hold (relative to its fmus/ folder)."""
+    names = [f"{FMUS[k].model_name}.fmu" for k in FMUS]
+    native = [k for k in FMUS if (NATIVE / k / "model.c").is_file()]
+    names += [f"native/{FMUS[k].model_name}.fmu" for k in native]
+    from impedance_cosim.cosim.system import SCENARIOS
+
+    systems = [f"{base}{s}.ssp" for base in ("PaperScenario", "PaperScenario-native")
+               for s in ("", *(f"-{name}" for name in SCENARIOS))]  # fmt: skip
+    fmi3 = ["PumaPlant", "ImpedanceController", "ImpedanceControllerClocked"] if native else []
+    names += [f"fmi3/{n}.fmu" for n in fmi3]
+    return names + systems + (["PaperScenario-fmi3.ssp"] if native else [])
+
+
+def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
+    """Zip the built files (all under out_dir), the references, LICENSE, README and SHA256SUMS
+    into dist_dir/<NAME>.zip, reproducibly. ValueError when an expected archive is missing."""
+    members: dict[str, bytes] = {}
+    for f in files:
+        members[f"fmus/{Path(f).resolve().relative_to(out_dir.resolve()).as_posix()}"] = Path(
+            f
+        ).read_bytes()
+    missing = [m for m in expected_members() if f"fmus/{m}" not in members]
+    if missing:
+        raise ValueError(
+            f"the bundle is incomplete, missing {', '.join(missing)}"
+            " (the native FMUs need a C compiler: gcc or $CC)"
+        )
+    for ref in reference_results():
+        members[f"reference/{ref.name}"] = ref.read_bytes()
+    members["LICENSE"] = (REPO / "LICENSE").read_bytes()
+    members["README.txt"] = readme(members).encode("utf-8")
+    sums = "".join(f"{hashlib.sha256(members[m]).hexdigest()}  {m}\n" for m in sorted(members))
+    members["SHA256SUMS"] = sums.encode()
+    dist_dir.mkdir(parents=True, exist_ok=True)
+    target = dist_dir / f"{NAME}.zip"
+    fd, tmp = tempfile.mkstemp(prefix=f".{NAME}.", suffix=".zip.tmp", dir=dist_dir)
+    os.close(fd)
+    try:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            for name in sorted(members):
+                info = zipfile.ZipInfo(f"{NAME}/{name}", date_time=DATE)
+                info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = 0o644 << 16
+                info.create_system = 3  # Unix, whatever the building machine
+                z.writestr(info, members[name])
+        os.chmod(tmp, 0o644)  # mkstemp made it private
+        os.replace(tmp, target)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return target
+
+
+def _fmu_line(name: str, data: bytes) -> str:
+    """One README line for an FMU: interfaces, platforms, what it is."""
+    import io
+
+    with zipfile.ZipFile(io.BytesIO(data)) as z:
+        md = ET.fromstring(z.read("modelDescription.xml"))
+        platforms = sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/")})
+        sources = any(n.startswith("sources/") for n in z.namelist())
+    kinds = [k for k in ("ModelExchange", "CoSimulation", "ScheduledExecution")
+             if md.find(k) is not None]  # fmt: skip
+    kinds.insert(0, f"FMI {md.get('fmiVersion')}")
+    where = ", ".join(platforms) + (", sources" if sources else "")
+    about = textwrap.fill(md.get("description", ""), 94, initial_indent=" " * 6,
+                          subsequent_indent=" " * 6)  # fmt: skip
+    return f"  {name}\n      {' + '.join(kinds)}; binaries: {where}\n{about}\n"
+
+
+def readme(members: dict[str, bytes]) -> str:
+    """The bundle's README.txt, generated from what it holds."""
+    fmus = "".join(_fmu_line(m, d) for m, d in sorted(members.items()) if m.endswith(".fmu"))
+    ssps = "".join(f"  {m}\n" for m in sorted(members) if m.endswith(".ssp"))
+    refs = "".join(f"  {m}\n" for m in sorted(members) if m.startswith("reference/"))
+    title = f"{NAME}: Impedance Control Without Using Velocity Measurements, as FMI 2.0 FMUs"
+    return f"""{title}
+{"=" * len(title)}
+
+The paper's reduced-order velocity observer + impedance controller and its 3-DOF planar
+PUMA-560 subset touching a stiff wall, as FMI 2.0 co-simulation FMUs and an SSP 1.0 system.
+Each FMU documents itself: open documentation/index.html inside it (unzip it first); it
+lists every variable with unit, range, default and meaning, the equations and the interfaces.
+
+FMUs (fmus/: the Python flavour, which needs a Python host such as fmpy; fmus/native/: the
+same models in C99, for any FMI host; fmus/fmi3/: the C99 models as FMI 3.0, the controller
+also with its sampling as an FMI 3.0 clock, and fmus/fmi3/python/ the Python ones):
+{fmus}
+Systems (SSP 1.0: the two FMUs wired; each scenario (observer, difference, measured) is a system
+description binding its own parameter set: in PaperScenario*.ssp as SSP variants
+(SystemStructure.ssd = observer, difference.ssd, measured.ssd), and alone in
+PaperScenario*-<scenario>.ssp for engines that read only SystemStructure.ssd):
+{ssps}
+Reference results (CSV; each FMU's default experiment, and the paper's 20 s closed loop):
+{refs}
+Run one FMU with fmpy (pip install fmpy):
+
+  fmpy simulate fmus/native/PumaPlant.fmu --output-interval 0.0025
+  fmpy simulate fmus/ImpedanceController.fmu --output-interval 0.0025
+
+Run the system with the impedance-cosim package, or with libcosim, ecospy or fmpy (see the
+project's README, "Running our FMUs and systems elsewhere"):
+
+  impedance-cosim run --ssp fmus/PaperScenario-native.ssp --scenario difference
+
+SHA256SUMS lists the checksum of every file (sha256sum -c SHA256SUMS).
+Licence: BSD-2-Clause, see LICENSE (also inside every FMU, documentation/licenses/).
+"""
+
+
+def cmd_dist(args: argparse.Namespace) -> int:
+    """`impedance-cosim dist`: build everything and write the bundle."""
+    try:
+        path = build_dist(Path(args.dir), Path(args.out))
+    except OSError as exc:  # an unwritable or misnamed folder: one line, not a traceback
+        where = exc.filename or args.dir
+        raise ValueError(f"cannot write {where}: {exc.strerror or exc}") from None
+    print(f"wrote {path}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    """The `dist` subcommand."""
+    p = sub.add_parser("dist", help="build everything and zip the distribution bundle")
+    p.add_argument("dir", nargs="?", default="dist", help="where the bundle goes (default dist/)")
+    p.add_argument("--out", default=str(DEFAULT_OUT),
+                   help="where the FMUs are built (default: the repository's fmus/)")  # fmt: skip
+    p.set_defaults(func=cmd_dist)

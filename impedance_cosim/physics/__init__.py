@@ -1,0 +1,2 @@
+"""The arm, the wall and the integrator: plain numeric code, no FMI (shipped inside the Python
+FMUs)."""

@@ -161,6 +161,12 @@ def test_no_report_writes_none(ssp_path, tmp_path):
     assert (out / "run.json").is_file() and not (out / "report.html").exists()
 
 
+def test_swap_shares_the_option(capsys):
+    with pytest.raises(SystemExit):
+        main(["swap", "--help"])
+    assert "--no-report" in capsys.readouterr().out
+
+
 def test_a_failed_run_writes_a_report_saying_so(ssp_path, tmp_path):
     out = tmp_path / "bad"
     argv = ["run", "--ssp", str(ssp_path), "--stop", "0.5", "--set", "plant.x0=5.0",

@@ -46,7 +46,7 @@ def replacement_problems(
     when it fits); see module docstring."""
     from fmpy import read_model_description
 
-    from impedance_cosim.cosim.master import connector_problems
+    from impedance_cosim.cosim.run_setup import connector_problems
 
     comp = system.component(component)
     fmu = Path(fmu)

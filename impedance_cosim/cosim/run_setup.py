@@ -9,8 +9,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.fmu import FmuError, check_fmu, fmi_value, model_description
+from impedance_cosim.cosim.fmu import fmi_value
 from impedance_cosim.cosim.fmu3 import ssp_type
+from impedance_cosim.cosim.fmu_files import FmuError, check_fmu, model_description
 from impedance_cosim.cosim.ssp import SystemDescription
 from impedance_cosim.fmi.variables import ENUMERATIONS
 

@@ -20,7 +20,8 @@ import pytest
 from bridge_model import protocol
 from impedance_cosim.apps import analysis
 from impedance_cosim.apps.hil import replacement_problems
-from impedance_cosim.apps.robot import Fault, start_robot, stop_robot
+from impedance_cosim.apps.robot import Fault
+from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master import RT_COLUMNS, Master
 from impedance_cosim.cosim.ssp import read_ssp

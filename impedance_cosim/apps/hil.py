@@ -21,16 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from bridge_model import protocol
-from impedance_cosim.apps.robot import (
-    LISTENING,
-    MAX_STEP_RANGE,
-    TICK_RANGE,
-    Fault,
-    RobotServer,
-    check_range,
-    start_robot,
-    stop_robot,
-)
+from impedance_cosim.apps.robot import MAX_STEP_RANGE, TICK_RANGE, Fault, RobotServer, check_range
+from impedance_cosim.apps.robot_process import LISTENING, start_robot, stop_robot
 
 # --- swap checks --------------------------------------------------------------------------------
 

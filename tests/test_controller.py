@@ -17,7 +17,8 @@ from controller_model.observer import observer_update
 from controller_model.parameters import TrajectoryParams
 from controller_model.virtual_trajectory import virtual_trajectory
 from impedance_cosim.fmi.model import ModelError
-from impedance_cosim.fmi.variables import UNITS, model_description
+from impedance_cosim.fmi.model_description import model_description
+from impedance_cosim.fmi.units import UNITS
 from impedance_cosim.physics.arm import Arm, ArmParams
 
 ARM = Arm()

@@ -128,3 +128,13 @@ def test_python_dash_m_reports_errors_of_other_modules_in_one_line(module, tmp_p
     assert done.returncode == 2, done.stderr
     assert lines == ["impedance-cosim swap: error: --replace expects component=path/to/file.fmu"
                      " (got 'bogus')"]  # fmt: skip
+
+
+def test_version(capsys):
+    """--version prints the package version and exits 0."""
+    import impedance_cosim
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == f"impedance-cosim {impedance_cosim.__version__}"

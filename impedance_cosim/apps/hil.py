@@ -82,7 +82,7 @@ def replacement_problems(
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
-    from impedance_cosim.cli import parse_overrides
+    from impedance_cosim.apps.options import parse_overrides
 
     realtime, tick, max_step, duration, faults, key = _robot_options(args)
     server = RobotServer(key, args.host, args.port, realtime, parse_overrides(args.set or []),
@@ -153,20 +153,18 @@ def _session_key(token_file: str | None) -> bytes:
 
 
 def _cmd_swap(args: argparse.Namespace) -> int:
-    from impedance_cosim import cli
+    from impedance_cosim.apps import options, run
     from impedance_cosim.cosim.ssp import read_ssp
 
     replace = {}
     for item in args.replace:  # cheap checks first, before any build
         comp, sep, path = item.partition("=")
         if not sep or not comp or not path:
-            raise cli.CliError(f"--replace expects component=path/to/file.fmu (got {item!r})")
+            raise options.CliError(f"--replace expects component=path/to/file.fmu (got {item!r})")
         replace[comp.strip()] = Path(path.strip())
-    overrides = cli.parse_overrides(args.set or [])
-    ssp = Path(args.ssp) if args.ssp else cli.DEFAULT_SSP
-    if not args.ssp and cli._stale(ssp):
-        print("building the FMUs and the system archive ...", file=sys.stderr)
-        cli._cmd_build(argparse.Namespace(out=str(ssp.parent), only=None))
+    overrides = options.parse_overrides(args.set or [])
+    ssp = Path(args.ssp) if args.ssp else options.DEFAULT_SSP
+    run.ensure_built(args, ssp)
     args.ssp = str(ssp)
     problems = []
     with read_ssp(ssp) as system:
@@ -174,13 +172,15 @@ def _cmd_swap(args: argparse.Namespace) -> int:
             problems += replacement_problems(system, comp, path, args.scenario, overrides)
     if problems:
         lines = "\n".join(f"  - {p}" for p in problems)
-        raise cli.CliError(f"the replacement does not fit the system ({len(problems)}):\n{lines}")
+        raise options.CliError(
+            f"the replacement does not fit the system ({len(problems)}):\n{lines}"
+        )
     args.fmu_files = replace
     robot = None
     if args.robot:
         bridged = [c for c, p in replace.items() if _has_parameter(p, "robot_port")]
         if len(bridged) != 1:
-            raise cli.CliError("--robot needs exactly one replacement that is a bridge FMU")
+            raise options.CliError("--robot needs exactly one replacement that is a bridge FMU")
         extra = [f"--set=plant.{s.split('.', 1)[1]}" for s in args.robot_set or []]
         token = protocol.new_token()  # to the robot in its environment, to the bridge in-process
         robot, port = start_robot(token, args.robot == "realtime", extra)
@@ -188,7 +188,7 @@ def _cmd_swap(args: argparse.Namespace) -> int:
                     f"{bridged[0]}.robot_token={token}"]  # fmt: skip
         print(f"robot process ({args.robot}) on port {port}", file=sys.stderr)
     try:
-        return cli._cmd_run(args)
+        return run.cmd_run(args)
     finally:
         if robot is not None:
             stop_robot(robot)
@@ -203,7 +203,7 @@ def _has_parameter(fmu: Path, name: str) -> bool:
 
 def add_parsers(sub) -> None:
     """The `swap` and `robot` subcommands."""
-    from impedance_cosim.cli import add_run_options
+    from impedance_cosim.apps.options import add_run_options
 
     p = sub.add_parser(
         "swap",

@@ -134,10 +134,10 @@ def add_parser(sub) -> None:
 
 
 def _default_ssp() -> Path:
-    from impedance_cosim.cli import _stale
+    from impedance_cosim.apps.run import stale
 
-    if _stale(DEFAULT_SSP):
-        from impedance_cosim.packaging.build import build_all
+    if stale(DEFAULT_SSP):
+        from impedance_cosim.packaging.build_all import build_all
 
         print("building the FMUs and the system archives ...", file=sys.stderr)
         build_all(DEFAULT_SSP.parent, None)

@@ -40,7 +40,6 @@ from impedance_cosim.cosim import fastloop, realtime
 from impedance_cosim.cosim.fmu import FmuError, FmuInstance
 from impedance_cosim.cosim.fmu3 import is_fmi3, open_fmu
 from impedance_cosim.cosim.realtime import RealtimeOptions, realtime_stats
-from impedance_cosim.cosim.realtime import format_realtime as format_realtime  # for cli.py
 from impedance_cosim.cosim.results import Feed, RunResult, Sink, size_problem
 from impedance_cosim.cosim.run_setup import (
     ALGORITHMS,

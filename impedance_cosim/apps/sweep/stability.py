@@ -17,6 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from impedance_cosim.apps.sweep.plan import master_arguments
+from impedance_cosim.apps.sweep.worker import prepare_worker, run_point
+
 SOURCES = ("observer", "difference", "measured")
 TIMINGS = ("gauss-seidel", "jacobi")  # sample-and-hold; torque one sample late
 DISCRETIZATIONS = ("euler", "implicit", "exponential")
@@ -198,7 +201,6 @@ def bisect_all(
 def check_cases(todo: list[Case], ssp: Path, options: dict[str, Any]) -> None:
     """Configure (not run) a Master for both ends of every case, so that a parameter the system
     lacks is one clear error now, not a bracket of "unstable" runs."""
-    from impedance_cosim.apps.sweep import master_arguments
     from impedance_cosim.cosim.master import Master
     from impedance_cosim.cosim.ssp import read_ssp
 
@@ -217,8 +219,6 @@ def run_study(
 ) -> list[dict[str, Any]]:
     """Every case's bisection, on the dask client's workers (serially in this process when
     client is None); the table rows in the order of todo."""
-    from impedance_cosim.apps import sweep
-
     data = Path(ssp).read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     options = {"stop": stop, "divergence_limit": 1e6}
@@ -231,19 +231,19 @@ def run_study(
 
         def wait() -> tuple[Case, float, dict]:
             case, x = queue.pop(0)
-            return case, x, sweep.run_point(data, digest, case.point(x), options)
+            return case, x, run_point(data, digest, case.point(x), options)
 
         return [b.row() for b in bisect_all(todo, submit, wait, progress)]
 
     from distributed import as_completed
 
     payload = client.scatter(data, broadcast=True, hash=False)
-    client.run(sweep.prepare_worker, data, digest)
+    client.run(prepare_worker, data, digest)
     running: dict[str, tuple[Case, float]] = {}
     stream = as_completed([])
 
     def submit_d(case: Case, x: float) -> None:
-        f = client.submit(sweep.run_point, payload, digest, case.point(x), options, pure=False)
+        f = client.submit(run_point, payload, digest, case.point(x), options, pure=False)
         running[f.key] = (case, x)
         stream.add(f)
 

@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.apps import stability as st
+from impedance_cosim.apps.sweep import stability as st
+from impedance_cosim.apps.sweep.plan import default_ssp
+from impedance_cosim.apps.sweep.worker import run_point
 
 PARTS = ("boundaries", "linear", "fig4", "gain")
 LINEAR_COLUMNS = ["velocity", "timing", "predicted_free_Hz", "predicted_contact_Hz",
@@ -57,7 +59,7 @@ def boundaries(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
                     args.velocity or st.SOURCES, args.timing or st.TIMINGS)  # fmt: skip
     if args.serial:
         return st.run_study(todo, ssp, args.stop)
-    from impedance_cosim.apps.sweep import dask_client
+    from impedance_cosim.apps.sweep.cluster import dask_client
 
     with dask_client(workers=args.workers) as client:
         return st.run_study(todo, ssp, args.stop, client)
@@ -204,8 +206,6 @@ def fig4_part(args: argparse.Namespace, ssp: Path, out: Path) -> list[dict[str, 
 def gain(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
     """Each observer discretization at 400 Hz (sample-and-hold) over a range of K, with ideal and
     1e-3 rad noisy encoders: the sweep's metrics (peak torque, settled force, noise)."""
-    from impedance_cosim.apps import sweep
-
     data = ssp.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     rows = []
@@ -215,7 +215,7 @@ def gain(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
                 point = {"system.scenario": "observer", "system.rate": 400,
                          "controller.observer_discretization": d, **st.SENSORS[sensor],
                          **{f"controller.K{i}": k for i in (1, 2, 3)}}  # fmt: skip
-                r = sweep.run_point(data, digest, point, {"stop": args.stop})
+                r = run_point(data, digest, point, {"stop": args.stop})
                 rows.append({"discretization": d, "K": k, "sensor": sensor, **r})
     return rows
 
@@ -264,7 +264,6 @@ def add_parser(sub) -> None:
 
 def _cmd_stability(args: argparse.Namespace) -> int:
     from impedance_cosim.apps import fig4
-    from impedance_cosim.apps.sweep_cli import _default_ssp
 
     args.parts = args.parts or list(PARTS)
     for part in args.parts:
@@ -280,7 +279,7 @@ def _cmd_stability(args: argparse.Namespace) -> int:
         raise st.StabilityError(  # so that every whole-Hz rate divides the run
             f"--stop must be a whole number of seconds >= 1 (got {args.stop})"
         )
-    ssp = Path(args.ssp) if args.ssp else _default_ssp()
+    ssp = Path(args.ssp) if args.ssp else default_ssp()
     if not ssp.is_file():
         raise FileNotFoundError(f"no system archive {ssp}")
     out = Path(args.out)

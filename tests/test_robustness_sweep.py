@@ -24,7 +24,9 @@ from impedance_cosim.cli import main
 
 
 def sweep_command(*args: str) -> list[str]:
-    return [sys.executable, "-m", "impedance_cosim.cli", "sweep", "--no-plots", *args]
+    """The sweep command in a subprocess; stderr holds only errors (no progress lines)."""
+    return [sys.executable, "-m", "impedance_cosim.cli", "sweep", "--no-plots", "--no-progress",
+            *args]  # fmt: skip
 
 
 def data_rows(table: Path) -> int:

@@ -58,6 +58,25 @@ def test_bisection_without_boundary_says_which_side():
     assert row["note"].startswith("unstable over the whole bracket")
 
 
+def test_bisection_progress_counts_runs_and_finished_bisections():
+    """progress(runs, bisections finished) after every run; no bisection over max_runs."""
+    todo = [stability.Case(q, "observer", "jacobi", "ideal") for q in ("rate", "wall_k")]
+    queue, calls = [], []
+
+    def wait():
+        case, x = queue.pop(0)
+        stable = x >= 243.0 if case.quantity == "rate" else x < 2e6
+        return case, x, {"status": "ok" if stable else "diverged"}
+
+    done = stability.bisect_all(todo, lambda c, x: queue.append((c, x)), wait,
+                                lambda runs, finished: calls.append((runs, finished)))  # fmt: skip
+    total = sum(len(b.runs) for b in done)
+    assert [r for r, _ in calls] == list(range(1, total + 1))
+    assert calls[-2][1] == 1 and calls[-1][1] == 2  # the first finished one run before the end
+    assert all(f == 0 for _, f in calls[: min(len(b.runs) for b in done) - 1])
+    assert all(2 < len(b.runs) <= stability.max_runs(b.case.quantity) for b in done)
+
+
 def test_case_points_and_selection():
     assert len(stability.cases(["K"], ["12-bit"], ["observer"], ["jacobi"])) == 3
     with pytest.raises(stability.StabilityError, match="nothing to run"):

@@ -17,7 +17,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from impedance_cosim.apps.sweep.execute import ProgressBar, RunsLostError, run_plan
+from impedance_cosim.apps.sweep.execute import RunProgress, RunsLostError, run_plan
 from impedance_cosim.apps.sweep.maps import DEFAULT_PLOTS, label, plot_map
 from impedance_cosim.apps.sweep.metrics import METRICS
 from impedance_cosim.apps.sweep.plan import (
@@ -109,7 +109,7 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--no-progress",
         action="store_true",
-        help="no progress bar",
+        help="no progress display (a bar on a terminal, a line every 10 s otherwise)",
     )
     p.add_argument(
         "--study",
@@ -226,7 +226,7 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         for name, text in known_parameters(read_ssp(ssp or default_ssp())).items():
             print(f"{name:28} {text}")
         return 0
-    progress = sys.stderr.isatty() and not args.no_progress
+    progress = not args.no_progress
     out = Path(args.out)
 
     def client():
@@ -264,10 +264,12 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
     with open_table(path, plan, args.resume) as table:
         tables.append(table)
         kept = len(table.done)
-        bar = ProgressBar(len(plan.points) - kept, progress)
         idle = len(table.done) == len(plan.points) or not factory
-        with contextlib.nullcontext() if idle else factory() as c:
-            rows = run_plan(plan, table, c, bar)
+        with (
+            contextlib.nullcontext() if idle else factory() as c,
+            RunProgress(len(plan.points) - kept, progress) as tick,
+        ):
+            rows = run_plan(plan, table, c, tick)
     elapsed = time.perf_counter() - started
     bad = [r for r in rows if r["status"] != "ok"]
     resumed = f" ({kept} kept from the table)" if args.resume else ""

@@ -14,8 +14,6 @@ point costs only its own row; runs that dask cancelled are lost (RunsLostError).
 from __future__ import annotations
 
 import math
-import sys
-import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -27,6 +25,7 @@ from impedance_cosim.apps.sweep.worker import (
     run_batch,
     run_point,
 )
+from impedance_cosim.util.progress import Progress
 
 TARGET_S = 0.3  # aimed wall time of one task
 IN_FLIGHT = 2  # batches submitted per worker
@@ -40,27 +39,25 @@ class RunsLostError(Exception):
     stops after the others (--resume runs them again)."""
 
 
-class ProgressBar:
-    """A one-line progress bar on stderr: runs done, failures, elapsed time."""
+class RunProgress:
+    """The progress of a sweep's runs on stderr (util.progress: a tqdm bar on a terminal, plain
+    lines otherwise): runs finished and how many did not stay bounded. A ProgressHook that counts
+    its calls (so one display can follow several plans) and a with-block that closes it."""
 
-    def __init__(self, total: int, enabled: bool = True) -> None:
-        self.total, self.enabled = total, enabled
-        self.bad = 0
-        self.start = time.perf_counter()
+    def __init__(self, total: int, enabled: bool = True, desc: str = "sweep") -> None:
+        self.display = Progress(total, desc, "run", enabled=enabled)
+        self.done = self.bad = 0
 
-    def __call__(self, done: int, row: dict) -> None:
+    def __call__(self, _n: int, row: dict) -> None:
+        self.done += 1
         self.bad += row.get("status") != "ok"
-        if not self.enabled:
-            return
-        frac = done / max(self.total, 1)
-        bar = "#" * int(30 * frac)
-        sys.stderr.write(
-            f"\r[{bar:<30}] {done}/{self.total} runs, {self.bad} not bounded, "
-            f"{time.perf_counter() - self.start:.1f} s"
-        )
-        if done == self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        self.display.update(self.done, f"{self.bad} not bounded")
+
+    def __enter__(self) -> RunProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.display.close()
 
 
 def run_serial(

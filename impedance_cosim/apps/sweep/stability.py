@@ -171,10 +171,11 @@ def bisect_all(
     todo: list[Case],
     submit: Callable[[Case, float], Any],
     wait: Callable[[], tuple[Case, float, dict]],
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[Bisection]:
     """Drive every case's bisection: submit(case, x) starts a run, wait() returns one finished
-    run (case, x, row). Returns the finished bisections in the order of todo."""
+    run (case, x, row); progress(runs finished, bisections finished) after each. Returns the
+    finished bisections in the order of todo."""
     state = {c: Bisection(c, *QUANTITIES[c.quantity][0]) for c in todo}
     flying: set[tuple[Case, float]] = set()
 
@@ -186,16 +187,25 @@ def bisect_all(
 
     for b in state.values():
         feed(b)
-    done = 0
+    done = finished = 0
     while flying:
         case, x, row = wait()
         flying.discard((case, x))
         state[case].record(x, *_stable(row))
         done += 1
-        if progress:
-            progress(done)
         feed(state[case])
+        finished += not any(c == case for c, _ in flying)
+        if progress:
+            progress(done, finished)
     return [state[c] for c in todo]
+
+
+def max_runs(quantity: str) -> int:
+    """The most runs one bisection of this quantity takes: both ends, then halving the bracket
+    (its logarithm for a log-scale bisection) until the tolerance."""
+    (lo, hi), _stable_end, log, tol = QUANTITIES[quantity]
+    width = math.log(hi / lo) / math.log(1 + tol) if log else (hi - lo) / tol
+    return 2 + math.ceil(math.log2(width)) + (not log)  # +1: the linear midpoint is floored
 
 
 def check_cases(todo: list[Case], ssp: Path, options: dict[str, Any]) -> None:
@@ -215,10 +225,10 @@ def run_study(
     ssp: Path,
     stop: float = 20.0,
     client=None,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Every case's bisection, on the dask client's workers (serially in this process when
-    client is None); the table rows in the order of todo."""
+    client is None); the table rows in the order of todo; progress as in bisect_all."""
     data = Path(ssp).read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     options = {"stop": stop, "divergence_limit": 1e6}

@@ -9,6 +9,7 @@ observer discretizations at 400 Hz, docs/observer_discretization.csv).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import hashlib
 import math
@@ -21,6 +22,7 @@ import numpy as np
 from impedance_cosim.apps.sweep import stability as st
 from impedance_cosim.apps.sweep.plan import default_ssp
 from impedance_cosim.apps.sweep.worker import run_point
+from impedance_cosim.util.progress import Progress
 
 PARTS = ("boundaries", "linear", "fig4", "gain")
 LINEAR_COLUMNS = ["velocity", "timing", "predicted_free_Hz", "predicted_contact_Hz",
@@ -57,12 +59,19 @@ def write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> Non
 def boundaries(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
     todo = st.cases(args.quantity or tuple(st.QUANTITIES), args.sensor or tuple(st.SENSORS),
                     args.velocity or st.SOURCES, args.timing or st.TIMINGS)  # fmt: skip
-    if args.serial:
-        return st.run_study(todo, ssp, args.stop)
-    from impedance_cosim.apps.sweep.cluster import dask_client
+    most = sum(st.max_runs(c.quantity) for c in todo)
+    with contextlib.ExitStack() as stack:
+        client = None
+        if not args.serial:
+            from impedance_cosim.apps.sweep.cluster import dask_client
 
-    with dask_client(workers=args.workers) as client:
-        return st.run_study(todo, ssp, args.stop, client)
+            client = stack.enter_context(dask_client(workers=args.workers))
+        display = stack.enter_context(Progress(most, "stability", "run", not args.no_progress))
+
+        def progress(runs: int, finished: int) -> None:
+            display.update(runs, f"{finished}/{len(todo)} bisections done (at most {most} runs)")
+
+        return st.run_study(todo, ssp, args.stop, client, progress)
 
 
 def linear(args: argparse.Namespace, ssp: Path, simulated: list[dict]) -> list[dict[str, Any]]:
@@ -259,6 +268,7 @@ def add_parser(sub) -> None:
     p.add_argument("--serial", action="store_true", help="no dask: the runs in this process")
     p.add_argument("--workers", type=int, default=None, help="LocalCluster workers")
     p.add_argument("--no-figures", action="store_true", help="only the tables")
+    p.add_argument("--no-progress", action="store_true", help="no progress display")
     p.set_defaults(func=_cmd_stability)
 
 

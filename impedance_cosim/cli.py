@@ -54,6 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     add_hil_parsers(sub)
 
     args = parser.parse_args(argv)
+    args.command_line = ["impedance-cosim", *(sys.argv[1:] if argv is None else argv)]
     with sigterm_raises():
         return _dispatch(args)
 

@@ -8,13 +8,15 @@ import contextlib
 import io
 import json
 import sys
+import time
 from pathlib import Path
 
 from impedance_cosim.apps.options import DEFAULT_SSP, REPO, parse_overrides, prepare_out
+from impedance_cosim.cosim import provenance
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from impedance_cosim.packaging.build import build_all
+    from impedance_cosim.packaging.build_all import build_all
 
     for path in build_all(prepare_out(Path(args.out)), args.only or None):
         print(f"built {path}")
@@ -58,16 +60,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Path) -> int:
     """The chosen scenario (CSV as it runs, summary, figures) and, for Fig. 4, its pair; 1 when
     any of them failed."""
-    from impedance_cosim.apps import analysis
     from impedance_cosim.cosim.master import Master
     from impedance_cosim.cosim.realtime import realtime_setting
     from impedance_cosim.cosim.results import CsvStream
     from impedance_cosim.cosim.ssp import read_ssp
-    from impedance_cosim.util.atomic import atomic_write
     from impedance_cosim.util.interrupt import RunInterrupted
 
     system = args.system = read_ssp(ssp)  # closed by _dispatch()
     progress = sys.stderr.isatty() and not args.no_progress
+    runs: list[dict] = []  # provenance of each run, written to run.json on every exit path
+    started, t0 = provenance.now_utc(), time.perf_counter()
 
     def run(scenario: str | None):
         master = Master(
@@ -87,9 +89,12 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                 result = master.run(progress=progress and stderr, sink=csv.write)
             except RunInterrupted as exc:
                 exc.message += f"; {csv.rows} rows kept in {path}"
+                entry = provenance.run_entry(master, None, overrides, path, "interrupted")
+                runs.append({**entry, "rows": csv.rows, "error": exc.message})
                 raise
             finally:
                 _echo_fmu_output(fmu_output.getvalue(), stderr)
+        runs.append(provenance.run_entry(master, result, overrides, path))
         status = "ok" if result.ok else "FAILED"
         span = result.data[-1, 0] - result.data[0, 0] if len(result.data) else 0.0
         rtf = span / max(result.wall_time, 1e-9)
@@ -101,10 +106,24 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                   f" {len(result.data)} rows kept in {path}", file=sys.stderr)  # fmt: skip
         return result
 
+    try:
+        return _scenarios_and_figures(args, system, overrides, out, run, runs)
+    finally:
+        record = provenance.record(runs, started, time.perf_counter() - t0,
+                                   command=args.command_line, ssp=ssp)  # fmt: skip
+        provenance.write(out / "run.json", record)
+
+
+def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: list) -> int:
+    """The main scenario, its summary and figures, and its Fig. 4 pair; 1 when any failed."""
+    from impedance_cosim.apps import analysis
+    from impedance_cosim.util.atomic import atomic_write
+
     main = run(args.scenario)
     if not main.ok:
         return 1
     values = analysis.summary(main)
+    runs[-1]["summary"] = values
     print(analysis.format_summary(values))
     if "realtime" in main.info:
         from impedance_cosim.cosim.master import format_realtime

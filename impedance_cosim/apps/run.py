@@ -126,7 +126,7 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
     runs[-1]["summary"] = values
     print(analysis.format_summary(values))
     if "realtime" in main.info:
-        from impedance_cosim.cosim.master import format_realtime
+        from impedance_cosim.cosim.realtime import format_realtime
 
         values["realtime"] = main.info["realtime"]
         print(format_realtime(main.info["realtime"]))

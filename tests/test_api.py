@@ -4,6 +4,8 @@ line, overrides, provenance, pandas optional, failed runs keep their rows, clear
 from __future__ import annotations
 
 import hashlib
+import os
+import signal
 import subprocess
 import sys
 import traceback
@@ -18,7 +20,9 @@ from impedance_cosim import api
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master import Master, MasterError
 from impedance_cosim.cosim.provenance import file_sha256
+from impedance_cosim.cosim.results import Feed
 from impedance_cosim.cosim.ssp import SspError
+from impedance_cosim.util.interrupt import RunInterrupted
 
 
 @pytest.fixture(scope="module")
@@ -95,6 +99,25 @@ def test_a_failed_run_keeps_its_rows(ssp_path, capfd):
     with pytest.raises(api.RunFailedError, match="rows kept"):
         r.check()
     assert "error: " not in capfd.readouterr().err  # the FMU's report is in r.error, once
+
+
+def test_an_interrupted_run_raises_with_its_rows(ssp_path, monkeypatch):
+    feed, sent = Feed.__call__, []
+
+    def interrupt_after_a_block(self, data, rows, extra=None):  # one Ctrl-C during the run
+        if rows > 1 and not sent:
+            sent.append(rows)
+            os.kill(os.getpid(), signal.SIGINT)
+        return feed(self, data, rows, extra)
+
+    monkeypatch.setattr(Feed, "__call__", interrupt_after_a_block)
+    with pytest.raises(RunInterrupted, match="SIGINT") as excinfo:
+        ic.simulate(ssp=ssp_path, stop_time=2.0)
+    r = excinfo.value.result  # the block under way is finished, then the run stops
+    assert isinstance(r, api.Result) and not r.ok and "interrupted by SIGINT" in r.error
+    assert len(r.time) == sent[0] < 801 and np.all(np.isfinite(r.data))
+    run = r.provenance["runs"][0]
+    assert run["status"] == "interrupted" and run["rows"] == len(r.time)
 
 
 def last_frame(excinfo) -> str:

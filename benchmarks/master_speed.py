@@ -22,7 +22,8 @@ from pathlib import Path
 from impedance_cosim.cosim.loop import run_models
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
+from impedance_cosim.packaging.build import DEFAULT_OUT
+from impedance_cosim.packaging.build_all import build_all
 
 
 def time_fmpy(ssp: Path, stop: float, step: float) -> float:

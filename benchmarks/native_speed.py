@@ -11,7 +11,8 @@ import time
 
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
+from impedance_cosim.packaging.build import DEFAULT_OUT
+from impedance_cosim.packaging.build_all import build_all
 
 STOP = 20.0
 

@@ -19,7 +19,8 @@ import numpy as np
 from impedance_cosim.cosim.engines import EngineError, run_in_libcosim
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
+from impedance_cosim.packaging.build import DEFAULT_OUT
+from impedance_cosim.packaging.build_all import build_all
 
 STEP = 1 / 400
 SIGNALS = ["plant.x", "plant.y", "plant.contact_force", "plant.qd1", "plant.qd2", "plant.qd3"]

@@ -24,7 +24,8 @@ from impedance_cosim.apps import sweep, sweep_batch
 from impedance_cosim.cosim.loop import run_models
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.packaging.build import DEFAULT_OUT, build_all
+from impedance_cosim.packaging.build import DEFAULT_OUT
+from impedance_cosim.packaging.build_all import build_all
 
 GRID = [  # 4 x 4 x 2 x 2 = 64 runs, all stable under Gauss-Seidel at 400 Hz
     "controller.K=10,25,50,100",

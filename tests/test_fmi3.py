@@ -19,8 +19,8 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3ScheduledExecution, FMU3Slave
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.apps.analysis import read_csv
 from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.results import read_csv
 from impedance_cosim.cosim.ssp import read_ssp
 from impedance_cosim.cosim.system import CONNECTIONS
 from impedance_cosim.packaging import toolchains

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from bridge_model import protocol
-from impedance_cosim.apps import analysis
 from impedance_cosim.apps.hil import replacement_problems
 from impedance_cosim.apps.robot import Fault, start_robot, stop_robot
 from impedance_cosim.cli import main
+from impedance_cosim.cosim import results
 from impedance_cosim.cosim.master import RT_COLUMNS, Master
 from impedance_cosim.cosim.ssp import read_ssp
 
@@ -181,14 +181,14 @@ def test_swap_native_and_noisy_plants_give_the_run_format(ssp_path, native_dir, 
     assert main(["run", *base, "--out", str(tmp_path / "run")]) == 0
     native = ["swap", *base, "--replace", f"plant={native_dir / 'PumaPlant.fmu'}"]
     assert main([*native, "--out", str(tmp_path / "native")]) == 0
-    ref = analysis.read_csv(tmp_path / "run" / "observer.csv")
-    got = analysis.read_csv(tmp_path / "native" / "observer.csv")
+    ref = results.read_csv(tmp_path / "run" / "observer.csv")
+    got = results.read_csv(tmp_path / "native" / "observer.csv")
     assert list(got) == list(ref)  # the same columns
     for name in ref:
         assert np.array_equal(got[name], ref[name]), name  # the native plant is bit-identical
     noisy = [*native, "--set", "plant.q_noise=1e-4", "--set", "plant.q_quant=1e-4"]
     assert main([*noisy, "--out", str(tmp_path / "noisy")]) == 0
-    got = analysis.read_csv(tmp_path / "noisy" / "observer.csv")
+    got = results.read_csv(tmp_path / "noisy" / "observer.csv")
     err = np.abs(got["plant.q1"] - got["plant.q1_true"])
     assert 1e-6 < err.max() < 1e-3
     assert (tmp_path / "noisy" / "observer_summary.json").is_file()
@@ -218,8 +218,8 @@ def test_swap_to_the_bridge_is_one_command(ssp_path, tmp_path):
     bridge = Path(ssp_path).parent / "BridgePlant.fmu"
     cmd = ["swap", *args, "--replace", f"plant={bridge}", "--robot", "lockstep", "--out", str(out)]
     assert main(cmd) == 0
-    ref = analysis.read_csv(tmp_path / "run" / "observer.csv")
-    got = analysis.read_csv(out / "observer.csv")
+    ref = results.read_csv(tmp_path / "run" / "observer.csv")
+    got = results.read_csv(out / "observer.csv")
     for name in ref:
         assert np.array_equal(got[name], ref[name]), name
 
@@ -300,7 +300,7 @@ def test_realtime_run_is_paced_and_timed(ssp_path, tmp_path, capsys):
     assert time.perf_counter() - started >= 0.5
     text = capsys.readouterr().out
     assert "real time at 400 Hz:" in text and "start jitter: p50" in text
-    rows = analysis.read_csv(out / "observer.csv")
+    rows = results.read_csv(out / "observer.csv")
     assert len(rows["time"]) == 201
     late = rows["rt.start_late_s"][1:]
     assert (late >= 0).all() and np.median(late) < 1e-3

@@ -26,9 +26,9 @@ from fmpy.fmi2 import (
 from fmpy.simulation import Input
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.apps.analysis import read_csv
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.replay import cs_crossing_times, held_input, me_replay
+from impedance_cosim.cosim.results import read_csv
 from impedance_cosim.cosim.ssp import read_ssp
 from impedance_cosim.cosim.system import CONNECTIONS
 from plant_model.model import PlantModel

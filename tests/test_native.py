@@ -16,9 +16,9 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.apps.analysis import read_csv
 from impedance_cosim.cosim.fmu import FmuError, FmuInstance
 from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.results import read_csv
 from impedance_cosim.cosim.ssp import read_ssp
 from impedance_cosim.cosim.system import CONNECTIONS
 from impedance_cosim.packaging.regression import REFERENCES, compare

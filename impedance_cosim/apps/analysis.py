@@ -1,4 +1,4 @@
-"""Results of a run: CSV output, the numbers of the summary, and the paper's figures (1-4).
+"""Results of a run: the numbers of the summary, and the paper's figures (1-4).
 
 Signals are looked up by name in any mapping name -> array ("time", "plant.x", ...), so a
 RunResult, a dict from run_models or a CSV read back all work.
@@ -10,7 +10,6 @@ back to their sample time; comparisons with the plant's truth (observer error, t
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,25 +23,6 @@ if TYPE_CHECKING:
 
 Signals = Mapping[str, np.ndarray]
 TARGET_FORCE = 1e4 * 0.00196
-
-
-def write_csv(path: Path, names: list[str], data: np.ndarray) -> None:
-    """Results as CSV: a header of names ("time" first), each value the shortest text that reads
-    back exactly; readable by fmpy.util.read_csv, so fmpy's plotting works on it. Written to a
-    temporary file renamed into place (see results.py)."""
-    from impedance_cosim.cosim import results
-
-    results.write_csv(path, names, data)
-
-
-def read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a results CSV, by name."""
-    with open(path, newline="") as f:
-        reader = csv.reader(f)
-        names = [n.strip('"') for n in next(reader)]
-        rows = [[float(v) for v in row] for row in reader]
-    data = np.array(rows).reshape(len(rows), len(names))
-    return {n: data[:, k] for k, n in enumerate(names)}
 
 
 def at_samples(s: Signals, name: str) -> np.ndarray:

@@ -16,7 +16,7 @@ from impedance_cosim.cosim import provenance
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from impedance_cosim.packaging.build import build_all
+    from impedance_cosim.packaging.build_all import build_all
 
     for path in build_all(prepare_out(Path(args.out)), args.only or None):
         print(f"built {path}")

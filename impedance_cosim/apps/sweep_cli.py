@@ -137,7 +137,7 @@ def _default_ssp() -> Path:
     from impedance_cosim.apps.run import stale
 
     if stale(DEFAULT_SSP):
-        from impedance_cosim.packaging.build import build_all
+        from impedance_cosim.packaging.build_all import build_all
 
         print("building the FMUs and the system archives ...", file=sys.stderr)
         build_all(DEFAULT_SSP.parent, None)

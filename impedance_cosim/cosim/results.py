@@ -8,6 +8,7 @@ that reads back to the same double (Python's repr). fmpy.util.read_csv reads it.
 
 from __future__ import annotations
 
+import csv
 from collections.abc import Callable
 from pathlib import Path
 
@@ -104,3 +105,13 @@ def _quote(name: str) -> str:
     if any(c in name for c in ',"\r\n'):
         return '"' + name.replace('"', '""') + '"'
     return name
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    """Columns of a results CSV, by name."""
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        names = [n.strip('"') for n in next(reader)]
+        rows = [[float(v) for v in row] for row in reader]
+    data = np.array(rows).reshape(len(rows), len(names))
+    return {n: data[:, k] for k, n in enumerate(names)}

@@ -19,7 +19,8 @@ import zipfile
 from pathlib import Path
 
 from impedance_cosim import __version__
-from impedance_cosim.packaging.build import DEFAULT_OUT, FMUS, NATIVE, REPO, build_all
+from impedance_cosim.packaging.build import DEFAULT_OUT, FMUS, NATIVE, REPO
+from impedance_cosim.packaging.build_all import build_all
 
 DATE = (2020, 1, 1, 0, 0, 0)  # the date of every member (zip cannot store times before 1980)
 NAME = f"impedance-cosim-{__version__}"

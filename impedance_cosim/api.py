@@ -25,7 +25,7 @@ import io
 import math
 import sys
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -167,7 +167,7 @@ def simulate(
     options = _options(stop_time, step_size, algorithm, overrides, fmu_files, progress)
     given = {"ssp": ssp, **{k: v for k, v in options.items() if k != "progress"}}
     call = _call_text("simulate", [scenario], given)
-    with _open(ssp) as (system, path):
+    with _system(ssp) as (system, path):
         return _run(system, path, scenario, options, call)
 
 
@@ -199,7 +199,7 @@ def sweep(
     runs = [{**options, "overrides": {**options["overrides"], parameter: v}} for v in values]
     from impedance_cosim.util.progress import Progress
 
-    with _open(ssp) as (system, path):
+    with _system(ssp) as (system, path):
         for run in runs:  # every value checked before the first run
             _master(system, scenario, run)
         results = []
@@ -215,28 +215,25 @@ def sweep(
 # --- the pieces -------------------------------------------------------------------------------
 
 
-class _open:  # noqa: N801 (used as a context manager, like open)
-    """The system archive (the default one built when stale), read and closed after use."""
+@contextlib.contextmanager
+def _system(ssp: str | Path | None) -> Iterator[tuple[SystemDescription, Path]]:
+    """The system archive (the default one built when stale), read, and closed after use."""
+    if ssp is not None and not isinstance(ssp, (str, Path)):
+        raise ValueError(f"ssp must be a path to a .ssp archive (got {ssp!r})")
+    path = Path(ssp) if ssp is not None else DEFAULT_SSP
+    if ssp is None:  # the build's report goes to stderr: stdout is the caller's
+        from impedance_cosim.apps.run import ensure_built
 
-    def __init__(self, ssp: str | Path | None) -> None:
-        if ssp is not None and not isinstance(ssp, (str, Path)):
-            raise ValueError(f"ssp must be a path to a .ssp archive (got {ssp!r})")
-        self.path = Path(ssp) if ssp is not None else DEFAULT_SSP
-        if ssp is None:  # the build's report goes to stderr: stdout is the caller's
-            from impedance_cosim.apps.run import ensure_built
-
-            with contextlib.redirect_stdout(sys.stderr):
-                ensure_built(argparse.Namespace(ssp=None), self.path)
-        try:
-            self.system = read_ssp(self.path)
-        except SspError as exc:
-            raise SspError(str(exc)) from None  # a short traceback: the message says it all
-
-    def __enter__(self) -> tuple[SystemDescription, Path]:
-        return self.system, self.path
-
-    def __exit__(self, *exc: object) -> None:
-        self.system.close()
+        with contextlib.redirect_stdout(sys.stderr):
+            ensure_built(argparse.Namespace(ssp=None), path)
+    try:
+        system = read_ssp(path)
+    except SspError as exc:
+        raise SspError(str(exc)) from None  # a short traceback: the message says it all
+    try:
+        yield system, path
+    finally:
+        system.close()
 
 
 def _options(stop_time, step_size, algorithm, overrides, fmu_files, progress) -> dict[str, Any]:
@@ -258,6 +255,9 @@ def _options(stop_time, step_size, algorithm, overrides, fmu_files, progress) ->
         bad = [k for k in mapping if not isinstance(k, str)]
         if bad:
             raise ValueError(f"{name}: names must be strings (got {bad[0]!r})")
+    bad = [v for v in (fmu_files or {}).values() if not isinstance(v, (str, Path))]
+    if bad:
+        raise ValueError(f"fmu_files: each value must be the path of an FMU (got {bad[0]!r})")
     if not isinstance(progress, bool):
         raise ValueError(f"progress must be True or False (got {progress!r})")
     return {

@@ -136,6 +136,7 @@ def last_frame(excinfo) -> str:
         ({"algorithm": "newton"}, MasterError, "algorithm must be one of"),
         ({"overrides": ["controller.K=80"]}, ValueError, "overrides must be a dict"),
         ({"fmu_files": {"robot": "x.fmu"}}, MasterError, "no component 'robot'"),
+        ({"fmu_files": {"plant": 3}}, ValueError, "fmu_files: each value must be the path"),
     ],
 )
 def test_bad_input_is_one_clear_line(ssp_path, kwargs, error, message):
@@ -150,6 +151,17 @@ def test_a_missing_archive(tmp_path):
     with pytest.raises(SspError, match="does not exist") as excinfo:
         ic.simulate(ssp=tmp_path / "none.ssp")
     assert last_frame(excinfo).endswith("api.py")
+
+
+def test_another_fmu_in_place_of_a_component(ssp_path, native_dir, k80):
+    plant = native_dir / "PumaPlant.fmu"
+    r = ic.simulate(ssp=ssp_path, stop_time=0.5, overrides={"controller.K": 80},
+                    fmu_files={"plant": plant})  # fmt: skip
+    assert r.ok and r.names == k80.names
+    fmu = r.provenance["runs"][0]["fmus"]["plant"]
+    assert fmu == {**fmu, "file": str(plant), "in_system_archive": False}
+    assert fmu["sha256"] == file_sha256(plant)
+    assert "fmu_files={'plant': " in r.provenance["call"]
 
 
 def test_figure_1_is_a_figure(k80, tmp_path):

@@ -11,18 +11,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from controller_model.model import (
-    INPUT_START,
-    Q_START,
-    ControllerModel,
-    TrajectoryParams,
-    impedance_law,
-    observer_update,
-    virtual_trajectory,
-    wrap_angle,
-)
+from controller_model.impedance_law import impedance_law, wrap_angle
+from controller_model.model import INPUT_START, Q_START, ControllerModel
+from controller_model.observer import observer_update
+from controller_model.parameters import TrajectoryParams
+from controller_model.virtual_trajectory import virtual_trajectory
 from impedance_cosim.fmi.model import ModelError
-from impedance_cosim.fmi.variables import UNITS, model_description
+from impedance_cosim.fmi.model_description import model_description
+from impedance_cosim.fmi.units import UNITS
 from impedance_cosim.physics.arm import Arm, ArmParams
 
 ARM = Arm()

@@ -19,7 +19,8 @@ import pytest
 
 from bridge_model import protocol
 from impedance_cosim.apps.hil import replacement_problems
-from impedance_cosim.apps.robot import Fault, start_robot, stop_robot
+from impedance_cosim.apps.robot import Fault
+from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
 from impedance_cosim.cosim import results
 from impedance_cosim.cosim.master import RT_COLUMNS, Master

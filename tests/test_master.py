@@ -3,6 +3,8 @@ bindings, initialization, time stamps, divergence, bad input; and the paper's st
 
 from __future__ import annotations
 
+import io
+import re
 import zipfile
 from pathlib import Path
 
@@ -247,3 +249,39 @@ def test_compiled_loop_equals_the_python_loop(ssp_path, algorithm):
         for k in ("c", "python")
     ]
     assert not bad[0].ok and np.array_equal(bad[0].data, bad[1].data)
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("loop", ["python", "c"])
+def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
+    ssp_path, monkeypatch, loop
+):
+    """Master.run(progress=stream): plain lines in a log (no carriage return), a bar on a
+    terminal; each names the parameter set and shows steps, simulated time and real-time factor."""
+    from impedance_cosim.cosim import master
+
+    if loop == "c" and master.fastloop.load() is None:
+        pytest.skip("no C compiler for the compiled loop")
+    monkeypatch.setattr(master._RunProgress, "DELAY", 0.0)
+    monkeypatch.setattr(master._RunProgress, "EVERY", 0.0)
+    system = read_ssp(ssp_path)
+    log = io.StringIO()
+    result = Master(system, stop_time=2.0, loop=loop).run(progress=log)
+    assert result.ok, result.error
+    lines = log.getvalue().splitlines()
+    assert "\r" not in log.getvalue() and len(lines) >= 2
+    name = result.parameter_set or "run"
+    assert all(line.startswith(f"{name}: ") for line in lines), lines
+    assert "100%" in lines[-1] and "800/800" in lines[-1] and "t=2.00 s" in lines[-1]
+    assert re.search(r"[0-9.]+x real time", lines[-1]), lines[-1]
+    terminal = _Terminal()
+    Master(system, stop_time=2.0, loop=loop).run(progress=terminal)
+    assert "\r" in terminal.getvalue() and "800/800" in terminal.getvalue()
+    quiet = io.StringIO()
+    monkeypatch.setattr(master._RunProgress, "DELAY", 60.0)
+    Master(system, stop_time=2.0, loop=loop).run(progress=quiet)
+    assert quiet.getvalue() == ""  # a run shorter than the delay shows nothing

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller_model.model import INPUT_START, VELOCITY_SOURCE, ControllerModel
+from controller_model.model import INPUT_START, ControllerModel
+from controller_model.parameters import VELOCITY_SOURCE
 from impedance_cosim.cosim.loop import run_models
 from impedance_cosim.fmi.model import ModelError
 

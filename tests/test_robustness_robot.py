@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from bridge_model import protocol
-from impedance_cosim.apps.robot import ROBOT_COMMAND, RobotServer, start_robot, stop_robot
+from impedance_cosim.apps.robot import RobotServer
+from impedance_cosim.apps.robot_process import ROBOT_COMMAND, start_robot, stop_robot
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
 from plant_model.model import PlantModel

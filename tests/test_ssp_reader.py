@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.cosim import ssp
+from impedance_cosim.cosim import ssd
 from impedance_cosim.cosim.ssp import Limits, SspError, SystemDescription, read_ssp
 
 SSD = "SystemStructure.ssd"
@@ -552,7 +552,7 @@ def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
     renamed/dropped/turned into links): each gives a SystemDescription or a one-line SspError.
     Run a second time with schema validation disabled, so the reader's own checks are fuzzed."""
     if schema == "without schema":
-        monkeypatch.setattr(ssp, "_schema", lambda name: _AnythingGoes())
+        monkeypatch.setattr(ssd, "_schema", lambda name: _AnythingGoes())
     rng = random.Random(20261201)
     base = archive.read_bytes()
     entries = members(archive)

@@ -251,7 +251,7 @@ def test_bad_requests_are_one_line(tmp_path, args, message):
 def test_observer_pole_of_each_discretization(form, pole, kh):
     """Arm at rest, no gravity, friction, torque or force, angles unchanged: the observer's own
     dynamics are yhat_i = pole(K h) yhat_i-1 (quadratic Coriolis terms vanish for a tiny yhat)."""
-    from controller_model.model import observer_update
+    from controller_model.observer import observer_update
     from impedance_cosim.physics.arm import Arm, ArmParams
 
     arm = Arm(ArmParams(g=0.0, f1=0.0, f2=0.0, f3=0.0))

@@ -21,16 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from bridge_model import protocol
-from impedance_cosim.apps.robot import (
-    LISTENING,
-    MAX_STEP_RANGE,
-    TICK_RANGE,
-    Fault,
-    RobotServer,
-    check_range,
-    start_robot,
-    stop_robot,
-)
+from impedance_cosim.apps.robot import MAX_STEP_RANGE, TICK_RANGE, Fault, RobotServer, check_range
+from impedance_cosim.apps.robot_process import LISTENING, start_robot, stop_robot
 
 # --- swap checks --------------------------------------------------------------------------------
 
@@ -46,7 +38,7 @@ def replacement_problems(
     when it fits); see module docstring."""
     from fmpy import read_model_description
 
-    from impedance_cosim.cosim.master import connector_problems
+    from impedance_cosim.cosim.run_setup import connector_problems
 
     comp = system.component(component)
     fmu = Path(fmu)

@@ -1,6 +1,7 @@
 """The master's stepping loop compiled from native/master/loop.c (with the machine's C compiler,
 once per source version, into a user cache folder) and called through ctypes. Without a C
-compiler the master falls back to its Python loop, which computes the same rows."""
+compiler the master falls back to its Python loop, which computes the same rows. `stepper` binds
+the master's wired components to it."""
 
 from __future__ import annotations
 
@@ -8,8 +9,14 @@ import ctypes
 import hashlib
 import os
 import subprocess
+from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from impedance_cosim.cosim.fmu import STATUS
 
 SOURCE = Path(__file__).resolve().parents[2] / "native" / "master" / "loop.c"
 
@@ -70,3 +77,60 @@ def load() -> ctypes.CDLL | None:
         ctypes.POINTER(LoopError),
     ]  # fmt: skip
     return lib
+
+
+def stepper(
+    lib: ctypes.CDLL,
+    ordered: list[Any],
+    data: np.ndarray,
+    jacobi: bool,
+    start_time: float,
+    step_size: float,
+    divergence_limit: float,
+    check_row: Callable[[list[str], np.ndarray, float], str | None],
+) -> Callable[..., tuple[int, str | None]]:
+    """The master's steps in the compiled loop, for its components (the master's slots, wired)
+    writing into `data`: returns steps(ordered, data, names, first, count) -> (rows filled,
+    error or None), like the master's Python loop."""
+    offsets, col = {}, 1
+    for s in ordered:
+        offsets[s.name] = col
+        col += len(s.outputs)
+    comps = (Comp * len(ordered))()
+    keep = []  # the ctypes arrays must outlive the loop
+    for c, s in zip(comps, ordered, strict=True):
+        in_vr = (ctypes.c_uint * max(1, len(s.inputs)))(*(s.fmu.vr(n) for n in s.inputs))
+        in_col = (ctypes.c_int * max(1, len(s.inputs)))(
+            *(offsets[ordered[j].name] + k for j, k in s.sources)
+        )
+        out_vr = (ctypes.c_uint * max(1, len(s.outputs)))(*(s.fmu.vr(n) for n in s.outputs))
+        keep += [in_vr, in_col, out_vr]
+        functions = s.fmu.slave._functions
+        c.component = s.fmu.slave.component
+        c.set_real = ctypes.cast(functions["fmi2SetReal"], ctypes.c_void_p).value
+        c.get_real = ctypes.cast(functions["fmi2GetReal"], ctypes.c_void_p).value
+        c.do_step = ctypes.cast(functions["fmi2DoStep"], ctypes.c_void_p).value
+        c.n_in, c.in_vr, c.in_col = len(s.inputs), in_vr, in_col
+        c.n_out, c.out_vr, c.out_col = len(s.outputs), out_vr, offsets[s.name]
+    assert data.flags["C_CONTIGUOUS"] and data.dtype == np.float64
+
+    def steps(_ordered, _data, names: list[str], first: int, count: int):
+        err = LoopError()
+        done = lib.run_loop(comps, len(ordered), int(jacobi), start_time, step_size,
+                            first, count, divergence_limit,
+                            data.ctypes.data, data.shape[1], ctypes.byref(err))  # fmt: skip
+        _ = keep
+        if err.comp >= 0:
+            s = ordered[err.comp]
+            s.fmu.fatal |= err.status == 4
+            call = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")[err.call]
+            t = start_time + (first + done) * step_size
+            detail = "; ".join(s.fmu.errors()[-3:]) or "no message logged"
+            status = STATUS[err.status] if 0 <= err.status < len(STATUS) else err.status
+            return done, f"{s.name}: {call} at t={t} returned {status} ({detail})"
+        if err.column >= 0:
+            row = data[first + done]
+            return done, check_row(names, row, row[0])
+        return done, None
+
+    return steps

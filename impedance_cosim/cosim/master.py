@@ -28,101 +28,34 @@
 
 from __future__ import annotations
 
-import ctypes
-import math
 import sys
 import time as wallclock
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
 
 from impedance_cosim.cosim import fastloop, realtime
-from impedance_cosim.cosim.fmu import (
-    STATUS,
-    FmuError,
-    FmuInstance,
-    check_fmu,
-    fmi_value,
-    model_description,
+from impedance_cosim.cosim.fmu import FmuError, FmuInstance
+from impedance_cosim.cosim.fmu3 import is_fmi3, open_fmu
+from impedance_cosim.cosim.realtime import RealtimeOptions, realtime_stats
+from impedance_cosim.cosim.results import Feed, RunResult, Sink, size_problem
+from impedance_cosim.cosim.run_setup import (
+    ALGORITHMS,
+    MasterError,
+    collect_parameters,
+    read_descriptions,
+    real_outputs,
+    step_count,
 )
-from impedance_cosim.cosim.fmu3 import is_fmi3, open_fmu, ssp_type
-from impedance_cosim.cosim.realtime import RealtimeOptions
-from impedance_cosim.cosim.results import Feed, Sink, size_problem
 from impedance_cosim.cosim.ssp import SspError, SystemDescription
-from impedance_cosim.fmi.variables import ENUMERATIONS
 from impedance_cosim.util.interrupt import RunInterrupted, StopSignals, signal_name
+from impedance_cosim.util.progress import Progress
 
-ALGORITHMS = ("gauss-seidel", "jacobi")
 CHUNK = 400  # steps per call into the loop (progress bar, interrupts)
 RT_COLUMNS = ["rt.start_late_s", "rt.compute_s", "rt.lateness_s"]
 MAX_INIT_PASSES = 20
-
-
-class MasterError(RuntimeError):
-    """The system cannot be run as configured (bad parameter name, missing connector...)."""
-
-
-@dataclass
-class RunResult:
-    """Recorded signals (rows up to where the run stopped) and why it stopped, if it failed."""
-
-    names: list[str]
-    data: np.ndarray
-    step_size: float
-    algorithm: str
-    parameter_set: str
-    error: str | None = None
-    wall_time: float = 0.0
-    info: dict[str, Any] = field(default_factory=dict)
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        try:
-            return self.data[:, self.names.index(name)]
-        except ValueError:
-            raise KeyError(f"no recorded signal {name!r}") from None
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
-
-def split_name(name: str) -> tuple[str, str]:
-    """ "component.variable" -> (component, variable), with a clear error."""
-    if "." not in name:
-        raise MasterError(f"parameter {name!r} must be written component.variable")
-    comp, var = name.split(".", 1)
-    return comp, var
-
-
-def real_outputs(description: Any) -> list[str]:
-    """Names of an FMU's Real outputs, in model order (the recorded signals)."""
-    return [
-        v.name
-        for v in description.modelVariables
-        if v.causality == "output" and ssp_type(v.type) == "Real"
-    ]
-
-
-def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list[str]:
-    """How an FMU's variables (name -> fmpy ScalarVariable) differ from a component's SSD
-    connectors: a missing variable, another causality, type or unit (one line each)."""
-    problems = []
-    for c in comp.connectors.values():
-        v = fmu_vars.get(c.name)
-        where = f"{comp.name}.{c.name}"
-        if v is None:
-            problems.append(f"{where}: no such variable in {fmu_name}")
-            continue
-        if v.causality != c.kind:
-            problems.append(f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD")
-        if ssp_type(v.type) != c.type:
-            problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
-        if c.type == "Real" and (v.unit or None) != (c.unit or None):
-            problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
-    return problems
 
 
 class _Slot:
@@ -169,21 +102,9 @@ class Master:
         if self.algorithm not in ALGORITHMS:
             raise MasterError(f"algorithm must be one of {ALGORITHMS} (got {self.algorithm!r})")
         self.step_size = step_size if step_size is not None else system.step_size
-        if self.step_size is None or not 0 < self.step_size < math.inf:
-            raise MasterError(f"step size must be a finite number > 0 (got {self.step_size})")
         self.start_time = system.start_time
         self.stop_time = stop_time if stop_time is not None else system.stop_time
-        if self.stop_time is None or not self.start_time < self.stop_time < math.inf:
-            raise MasterError(f"stop time must be finite and > start time (got {self.stop_time})")
-        steps = (self.stop_time - self.start_time) / self.step_size
-        if not math.isfinite(steps):
-            raise MasterError(f"stop time {self.stop_time:g} s at step {self.step_size:g} s is too"
-                              " many steps")  # fmt: skip
-        if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-            raise MasterError(
-                f"the run length {self.stop_time - self.start_time:g} s is not a whole number of"
-                f" {self.step_size:g} s steps"
-            )
+        steps = step_count(self.start_time, self.stop_time, self.step_size)
         self.divergence_limit = divergence_limit
         if loop not in ("auto", "c", "python"):
             raise MasterError(f"loop must be auto, c or python (got {loop!r})")
@@ -211,85 +132,15 @@ class Master:
             if name not in self.fmu_files:
                 raise MasterError(f"no component {name!r} to replace (have {names})")
             self.fmu_files[name] = Path(path)
-        self.parameters = self._collect_parameters(overrides or {})
+        self.descriptions = read_descriptions(self.fmu_files)
+        self.parameters = collect_parameters(
+            system, parameter_set, self.descriptions, self.fmu_files, overrides or {}
+        )
         columns = 1 + sum(len(real_outputs(md)) for md in self.descriptions.values())
         columns += len(RT_COLUMNS) if realtime else 0
         too_big = size_problem(int(round(steps)), columns, self.stop_time, self.step_size)
         if too_big:
             raise MasterError(too_big)
-
-    # --- configuration checks -------------------------------------------------------------------
-
-    def _collect_parameters(self, overrides: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-        """Parameter values per component, checked against the FMUs' variables and units."""
-        self.descriptions = {}
-        for name, path in self.fmu_files.items():
-            if not path.is_file():
-                raise MasterError(f"component {name}: FMU {path} does not exist")
-            try:
-                self.descriptions[name] = model_description(path)
-            except Exception as exc:
-                raise MasterError(f"component {name}: cannot read {path.name}: {exc}") from None
-            try:
-                check_fmu(path, self.descriptions[name])
-            except FmuError as exc:
-                raise MasterError(f"component {name}: {exc}") from None
-        variables = {
-            name: {v.name: v for v in md.modelVariables} for name, md in self.descriptions.items()
-        }
-        self._check_connectors(variables)
-        values: dict[str, dict[str, Any]] = {name: {} for name in self.fmu_files}
-        for p in self.system.parameter_sets.get(self.parameter_set, []):
-            comp, var = split_name(p.name)
-            v = self._parameter_variable(
-                variables, comp, var, f"in parameter set {self.parameter_set!r}"
-            )
-            if p.unit and v.unit and p.unit != v.unit:
-                raise MasterError(f"parameter {p.name}: unit {p.unit} but the FMU's is {v.unit}")
-            values[comp][var] = self._value(v, p.value, p.name)
-        for name, value in overrides.items():
-            comp, var = split_name(name)
-            targets = [var]
-            if comp in variables and var not in variables[comp]:
-                vector = [f"{var}{i}" for i in (1, 2, 3)] + [f"{var}_{i}" for i in (1, 2, 3)]
-                targets = [n for n in vector if n in variables[comp]] or [var]
-            for t in targets:
-                v = self._parameter_variable(variables, comp, t, "given with --set")
-                values[comp][t] = self._value(v, value, f"{comp}.{t}")
-        return values
-
-    def _parameter_variable(self, variables, comp: str, var: str, where: str):
-        if comp not in variables:
-            raise MasterError(f"unknown component {comp!r} {where} (have {list(variables)})")
-        v = variables[comp].get(var)
-        if v is None:
-            raise MasterError(f"unknown parameter {comp}.{var} {where}")
-        if v.causality != "parameter":
-            raise MasterError(f"{comp}.{var} is a{'n' if v.causality[0] in 'aeiou' else ''} "
-                              f"{v.causality}, not a parameter")  # fmt: skip
-        return v
-
-    @staticmethod
-    def _value(v, value: Any, name: str) -> Any:
-        enum = ENUMERATIONS.get(getattr(v.declaredType, "name", ""))
-        try:
-            if enum and isinstance(value, str) and not value.strip().lstrip("+-").isdigit():
-                try:  # an item name of our enumerations ("difference" for velocity_source)
-                    value = enum.value(value.strip())
-                except ValueError as exc:
-                    raise ValueError(f"variable {name}: {exc}") from None
-            return fmi_value(v.type, value, name)
-        except ValueError as exc:
-            raise MasterError(str(exc)) from None
-
-    def _check_connectors(self, variables) -> None:
-        """Every SSD connector exists in its FMU with the same causality, type and unit."""
-        problems = []
-        for comp in self.system.components:
-            fmu_name = self.fmu_files[comp.name].name
-            problems += connector_problems(comp, variables[comp.name], fmu_name)
-        if problems:
-            raise MasterError("the FMUs do not match the SSD: " + "; ".join(problems))
 
     # --- run ------------------------------------------------------------------------------------
 
@@ -323,7 +174,7 @@ class Master:
         feed = Feed(sink, record)
         feed(data, rows, timing)
         started = wallclock.perf_counter()
-        bar = _Progress(n, h, sys.stderr if progress is True else progress) if progress else None
+        bar = self._progress(n, progress)
         ordered: list[_Slot] = []
         try:
             for name in self.order:
@@ -342,7 +193,11 @@ class Master:
             fast = fastloop.load() if self.loop != "python" and not fmi3 else None
             if self.loop == "c" and fast is None:
                 raise MasterError("the C loop cannot be compiled here (no C compiler?)")
-            step = self._c_steps(fast, ordered, data, names) if fast else self._python_steps
+            step = self._python_steps
+            if fast:
+                step = fastloop.stepper(fast, ordered, data, self.algorithm == "jacobi",
+                                        self.start_time, self.step_size, self.divergence_limit,
+                                        self._check_row)  # fmt: skip
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
                 rt = self.realtime if isinstance(self.realtime, RealtimeOptions) else None
@@ -355,7 +210,7 @@ class Master:
                         timing,
                         rt.spin_s,
                         lambda: stop.signum is not None,
-                        bar.update if bar else None,
+                        bar.update_steps if bar else None,
                     )
                 info["realtime"] = {**realtime_stats(timing[1:rows], h), "notes": notes}
             while not error and rows < n + 1 and stop.signum is None:
@@ -364,7 +219,7 @@ class Master:
                 rows += done
                 feed(data, rows, timing)
                 if bar:
-                    bar.update(rows - 1)
+                    bar.update_steps(rows - 1)
             info["stepping_s"] = wallclock.perf_counter() - stepping
             info["loop"] = "c" if fast else "python"
         except (FmuError, MasterError, SspError, ValueError, KeyError) as exc:
@@ -394,6 +249,14 @@ class Master:
             wall_time=wallclock.perf_counter() - started,
             info=info,
         )
+
+    def _progress(self, steps: int, progress: bool | TextIO) -> _RunProgress | None:
+        """The progress display on stderr (or the stream given), or None when not wanted."""
+        if not progress:
+            return None
+        stream = sys.stderr if progress is True else progress
+        return _RunProgress(steps, self.parameter_set or "run", self.start_time, self.step_size,
+                            stream)  # fmt: skip
 
     def _wire(self, ordered: list[_Slot]) -> None:
         """Each component's inputs: the (component, output) that feeds it, per the SSD."""
@@ -433,52 +296,6 @@ class Master:
             if error:
                 return i + 1 - first, error
         return count, None
-
-    def _c_steps(self, lib, ordered, data, names):
-        """The same steps in the compiled loop (native/master/loop.c); returns a step function."""
-        offsets, col = {}, 1
-        for s in ordered:
-            offsets[s.name] = col
-            col += len(s.outputs)
-        comps = (fastloop.Comp * len(ordered))()
-        keep = []  # the ctypes arrays must outlive the loop
-        for c, s in zip(comps, ordered, strict=True):
-            in_vr = (ctypes.c_uint * max(1, len(s.inputs)))(*(s.fmu.vr(n) for n in s.inputs))
-            in_col = (ctypes.c_int * max(1, len(s.inputs)))(
-                *(offsets[ordered[j].name] + k for j, k in s.sources)
-            )
-            out_vr = (ctypes.c_uint * max(1, len(s.outputs)))(*(s.fmu.vr(n) for n in s.outputs))
-            keep += [in_vr, in_col, out_vr]
-            functions = s.fmu.slave._functions
-            c.component = s.fmu.slave.component
-            c.set_real = ctypes.cast(functions["fmi2SetReal"], ctypes.c_void_p).value
-            c.get_real = ctypes.cast(functions["fmi2GetReal"], ctypes.c_void_p).value
-            c.do_step = ctypes.cast(functions["fmi2DoStep"], ctypes.c_void_p).value
-            c.n_in, c.in_vr, c.in_col = len(s.inputs), in_vr, in_col
-            c.n_out, c.out_vr, c.out_col = len(s.outputs), out_vr, offsets[s.name]
-        assert data.flags["C_CONTIGUOUS"] and data.dtype == np.float64
-        jacobi = int(self.algorithm == "jacobi")
-
-        def steps(_ordered, _data, _names, first: int, count: int):
-            err = fastloop.LoopError()
-            done = lib.run_loop(comps, len(ordered), jacobi, self.start_time, self.step_size,
-                                first, count, self.divergence_limit,
-                                data.ctypes.data, data.shape[1], ctypes.byref(err))  # fmt: skip
-            _ = keep
-            if err.comp >= 0:
-                s = ordered[err.comp]
-                s.fmu.fatal |= err.status == 4
-                call = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")[err.call]
-                t = self.start_time + (first + done) * self.step_size
-                detail = "; ".join(s.fmu.errors()[-3:]) or "no message logged"
-                status = STATUS[err.status] if 0 <= err.status < len(STATUS) else err.status
-                return done, f"{s.name}: {call} at t={t} returned {status} ({detail})"
-            if err.column >= 0:
-                row = data[first + done]
-                return done, self._check_row(names, row, row[0])
-            return done, None
-
-        return steps
 
     def _initialize(self, ordered: list[_Slot]) -> None:
         for s in ordered:
@@ -525,65 +342,20 @@ class Master:
         return f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g} (limit {self.divergence_limit:g})"
 
 
-def realtime_stats(timing: np.ndarray, h: float) -> dict[str, Any]:
-    """Statistics of the steps' timing rows (RT_COLUMNS): deadline misses (a step completed after
-    its deadline), start jitter (actual - scheduled start) p50/p99/max, step duration p99/max,
-    worst lateness; times in seconds."""
-    if not len(timing):
-        return {"steps": 0, "rate_hz": 1.0 / h, "deadline_misses": 0}
-    start, compute, late = timing[:, 0], timing[:, 1], timing[:, 2]
-    return {
-        "steps": len(timing),
-        "rate_hz": 1.0 / h,
-        "deadline_misses": int(np.count_nonzero(late > 0.0)),
-        "jitter_p50_s": float(np.percentile(start, 50)),
-        "jitter_p99_s": float(np.percentile(start, 99)),
-        "jitter_max_s": float(start.max()),
-        "compute_p50_s": float(np.percentile(compute, 50)),
-        "compute_p99_s": float(np.percentile(compute, 99)),
-        "compute_max_s": float(compute.max()),
-        "lateness_max_s": float(late.max()),
-    }
+class _RunProgress(Progress):
+    """A run's progress (util.progress: a bar on a terminal, plain periodic lines otherwise),
+    shown once it has taken more than a second, with the simulated time and real-time factor."""
 
+    DELAY, EVERY = 1.0, 10.0  # s: nothing before DELAY; in a log, a line every EVERY
 
-def format_realtime(stats: dict[str, Any]) -> str:
-    """The real-time statistics as summary lines."""
-    if not stats.get("steps"):
-        return "real time: no step taken"
-    ms = 1e3
-    return (
-        f"real time at {stats['rate_hz']:g} Hz: {stats['deadline_misses']} deadline misses in"
-        f" {stats['steps']} steps\n"
-        f"start jitter: p50 {ms * stats['jitter_p50_s']:.3f} ms, p99"
-        f" {ms * stats['jitter_p99_s']:.3f} ms, max {ms * stats['jitter_max_s']:.3f} ms\n"
-        f"step duration: p50 {ms * stats['compute_p50_s']:.3f} ms, p99"
-        f" {ms * stats['compute_p99_s']:.3f} ms, max {ms * stats['compute_max_s']:.3f} ms"
-        f" (worst slack {-ms * stats['lateness_max_s']:.3f} ms)"
-    ) + "".join(f"\nreal time: {note}" for note in stats.get("notes", []))
+    def __init__(self, steps: int, name: str, t0: float, h: float, stream: TextIO) -> None:
+        super().__init__(steps, name, "step", stream=stream, delay=self.DELAY, every=self.EVERY)
+        self.t0, self.h = t0, h
 
-
-class _Progress:
-    """A one-line progress bar on stderr, shown once a run has taken more than a second."""
-
-    def __init__(self, steps: int, h: float, stream: TextIO) -> None:
-        self.steps, self.h, self.stream = steps, h, stream
-        self.start = wallclock.perf_counter()
-        self.last = 0.0
-        self.shown = False
-
-    def update(self, i: int) -> None:
-        now = wallclock.perf_counter() - self.start
-        if now < 1.0 or now - self.last < 0.2:
+    def update_steps(self, i: int) -> None:
+        """i steps done."""
+        if not self.enabled:
             return
-        self.last, self.shown = now, True
-        frac = i / self.steps
-        bar = "#" * int(30 * frac)
-        rtf = i * self.h / now
-        self.stream.write(
-            f"\r[{bar:<30}] {100 * frac:5.1f}%  t={i * self.h:7.2f} s  {rtf:6.1f}x real time"
-        )
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.shown:
-            self.stream.write("\n")
+        elapsed = wallclock.perf_counter() - self.start
+        factor = i * self.h / elapsed if elapsed > 0 else 0.0
+        self.update(i, f"t={self.t0 + i * self.h:.2f} s, {factor:.1f}x real time")

@@ -1,4 +1,5 @@
-"""The real-time step loop of the master, and what it can ask of the OS to keep its deadlines.
+"""The real-time step loop of the master, what it can ask of the OS to keep its deadlines, and
+the statistics of a real-time run (deadline misses, jitter, step duration).
 
 Step i starts at the wall-clock time t0 + i h: sleep until `spin_s` before it, then busy-wait (a
 sleep overshoots by up to a scheduler tick); a late step is never skipped, the next one starts at
@@ -189,3 +190,40 @@ def realtime_setting(args: Any) -> bool | RealtimeOptions:
             raise ValueError(f"{', '.join(FLAGS[k] for k in given)} only apply with --realtime")
         return False
     return RealtimeOptions(**given) if given else True
+
+
+def realtime_stats(timing: np.ndarray, h: float) -> dict[str, Any]:
+    """Statistics of the steps' timing rows (RT_COLUMNS): deadline misses (a step completed after
+    its deadline), start jitter (actual - scheduled start) p50/p99/max, step duration p99/max,
+    worst lateness; times in seconds."""
+    if not len(timing):
+        return {"steps": 0, "rate_hz": 1.0 / h, "deadline_misses": 0}
+    start, compute, late = timing[:, 0], timing[:, 1], timing[:, 2]
+    return {
+        "steps": len(timing),
+        "rate_hz": 1.0 / h,
+        "deadline_misses": int(np.count_nonzero(late > 0.0)),
+        "jitter_p50_s": float(np.percentile(start, 50)),
+        "jitter_p99_s": float(np.percentile(start, 99)),
+        "jitter_max_s": float(start.max()),
+        "compute_p50_s": float(np.percentile(compute, 50)),
+        "compute_p99_s": float(np.percentile(compute, 99)),
+        "compute_max_s": float(compute.max()),
+        "lateness_max_s": float(late.max()),
+    }
+
+
+def format_realtime(stats: dict[str, Any]) -> str:
+    """The real-time statistics as summary lines."""
+    if not stats.get("steps"):
+        return "real time: no step taken"
+    ms = 1e3
+    return (
+        f"real time at {stats['rate_hz']:g} Hz: {stats['deadline_misses']} deadline misses in"
+        f" {stats['steps']} steps\n"
+        f"start jitter: p50 {ms * stats['jitter_p50_s']:.3f} ms, p99"
+        f" {ms * stats['jitter_p99_s']:.3f} ms, max {ms * stats['jitter_max_s']:.3f} ms\n"
+        f"step duration: p50 {ms * stats['compute_p50_s']:.3f} ms, p99"
+        f" {ms * stats['compute_p99_s']:.3f} ms, max {ms * stats['compute_max_s']:.3f} ms"
+        f" (worst slack {-ms * stats['lateness_max_s']:.3f} ms)"
+    ) + "".join(f"\nreal time: {note}" for note in stats.get("notes", []))

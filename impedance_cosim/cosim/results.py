@@ -1,4 +1,7 @@
-"""Results CSV written as a run goes: rows are appended to a temporary file beside the target
+"""The result of a run: in memory (RunResult, the recorded signals and why the run stopped) and
+on disk.
+
+Results CSV written as a run goes: rows are appended to a temporary file beside the target
 and flushed after every block; closing the stream (also on an exception or an interruption)
 renames it into place, so the CSV at the target name is always whole, and holds every row
 computed before the run stopped.
@@ -10,7 +13,9 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -18,6 +23,30 @@ from impedance_cosim.util import atomic
 
 MAX_RESULT_BYTES = 2**30  # the recorded rows of one run must fit in this (refused before running)
 Sink = Callable[[list[str], np.ndarray], None]  # (column names, new rows), see Master.run
+
+
+@dataclass
+class RunResult:
+    """Recorded signals (rows up to where the run stopped) and why it stopped, if it failed."""
+
+    names: list[str]
+    data: np.ndarray
+    step_size: float
+    algorithm: str
+    parameter_set: str
+    error: str | None = None
+    wall_time: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.data[:, self.names.index(name)]
+        except ValueError:
+            raise KeyError(f"no recorded signal {name!r}") from None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
 
 
 def size_problem(steps: int, columns: int, stop: float, step: float) -> str | None:

@@ -18,7 +18,8 @@ from typing import Any
 
 from controller_model.model import ControllerModel
 from impedance_cosim import __version__
-from impedance_cosim.fmi.variables import AUTHOR, COPYRIGHT, UNITS, Variable
+from impedance_cosim.fmi.units import UNITS
+from impedance_cosim.fmi.variables import AUTHOR, COPYRIGHT, Variable
 from plant_model.model import PlantModel
 
 NS = {

@@ -9,23 +9,17 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-from impedance_cosim.fmi import variables as _fmi2
+from impedance_cosim.fmi.model_description import LOG_CATEGORIES, xml_value
+from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
 from impedance_cosim.fmi.variables import (
-    LOG_CATEGORIES,
     METADATA,
+    SAMPLED_INPUTS,
     ModelExchange,
     Variable,
-    _fmt,
-    add_unit_definitions,
     derivative_variables,
 )
 
 FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
-# What the FMI 2.0 writer declares beyond units, where the tables define it (issue 12: quantities,
-# display units, enumerations, sampled-data dependencies); absent, the FMI 3.0 XML goes without.
-QUANTITIES: dict[str, str] = getattr(_fmi2, "QUANTITIES", {})
-DISPLAY_UNITS: dict[str, tuple[str, float, float]] = getattr(_fmi2, "DISPLAY_UNITS", {})
-SAMPLED_INPUTS = getattr(_fmi2, "SAMPLED_INPUTS", object())
 
 
 @dataclass(frozen=True)
@@ -114,7 +108,7 @@ def model_description3(
                 **common,
                 "canHandleVariableCommunicationStepSize": "true",
                 "hasEventMode": "false",
-                "mightReturnEarlyFromDoStep": _fmt(early_return),
+                "mightReturnEarlyFromDoStep": xml_value(early_return),
                 "providesIntermediateUpdate": "false",
                 "canReturnEarlyAfterIntermediateUpdate": "false",
             },
@@ -164,12 +158,12 @@ def model_description3(
             if v.unit in DISPLAY_UNITS:
                 attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
         if v.min is not None:
-            attrs["min"] = _fmt(v.min)
+            attrs["min"] = xml_value(v.min)
         if v.max is not None:
-            attrs["max"] = _fmt(v.max)
+            attrs["max"] = xml_value(v.max)
         start = v.causality not in ("output", "local")
         if start and v.type != "String":
-            attrs["start"] = _fmt(v.start)
+            attrs["start"] = xml_value(v.start)
         element = ET.SubElement(mv, FMI3_TYPES[v.type], attrs)
         if start and v.type == "String":
             ET.SubElement(element, "Start", {"value": str(v.start)})

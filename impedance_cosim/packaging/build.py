@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import impedance_cosim
-from impedance_cosim.fmi.variables import model_description
+from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.packaging import toolchains
 from impedance_cosim.util.atomic import temp_path
 

@@ -1,0 +1,197 @@
+"""The FMI 2.0 modelDescription.xml written from a model's variable table (variables.py): units,
+ranges, descriptions, type definitions, log categories and ModelStructure, which pythonfmu 0.7
+cannot write itself. Standard library only: bundled in the Python FMUs."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+
+from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
+from impedance_cosim.fmi.variables import (
+    FMI_ENUMERATIONS,
+    METADATA,
+    SAMPLED_INPUTS,
+    ModelExchange,
+    Variable,
+    derivative_variables,
+)
+
+LOG_CATEGORIES = {
+    "logStatusWarning": "Messages with fmi2Warning status",
+    "logStatusDiscard": "Messages with fmi2Discard status",
+    "logStatusError": "Messages with fmi2Error status (bad parameter, bad input, failed step)",
+    "logStatusFatal": "Messages with fmi2Fatal status",
+    "logAll": "All messages",
+}
+
+
+def model_description(
+    model_name: str,
+    description: str,
+    guid: str,
+    variables: list[Variable],
+    default_experiment: dict[str, float],
+    generation_tool: str,
+    output_dependencies: str | None = None,
+    needs_execution_tool: bool = False,
+    source_files: list[str] | None = None,
+    model_exchange: ModelExchange | None = None,
+) -> bytes:
+    """Complete FMI 2.0 modelDescription.xml for a model's variable table: co-simulation, plus
+    Model Exchange (state derivatives appended as der(<state>) locals) when model_exchange is given.
+
+    output_dependencies: None means outputs may depend on every input (conservative); "" declares
+    that no output depends directly on an input (no algebraic loop through this FMU); under
+    Model Exchange the outputs then depend on the continuous states only. SAMPLED_INPUTS: every
+    output depends on every input, but only at sample instants (dependenciesKind "discrete")."""
+    if model_exchange:
+        variables = [*variables, *derivative_variables(variables, model_exchange)]
+    index = {v.name: i + 1 for i, v in enumerate(variables)}
+    root = ET.Element(
+        "fmiModelDescription",
+        {
+            "fmiVersion": "2.0",
+            "modelName": model_name,
+            "guid": guid,
+            "description": description,
+            **METADATA,
+            "generationTool": generation_tool,
+            "variableNamingConvention": "flat",
+            "numberOfEventIndicators": str(
+                model_exchange.event_indicators if model_exchange else 0
+            ),
+        },
+    )
+    common = {
+        "modelIdentifier": model_name,
+        "needsExecutionTool": xml_value(needs_execution_tool),
+        "canBeInstantiatedOnlyOncePerProcess": "false",
+        "canNotUseMemoryManagementFunctions": "true",
+        "canGetAndSetFMUstate": "true",
+        "canSerializeFMUstate": "true",
+    }
+    interfaces = []
+    if model_exchange:
+        interfaces.append(
+            ET.SubElement(
+                root, "ModelExchange", {**common, "completedIntegratorStepNotNeeded": "true"}
+            )
+        )
+    interfaces.append(
+        ET.SubElement(
+            root,
+            "CoSimulation",
+            {
+                **common,
+                "canHandleVariableCommunicationStepSize": "true",
+                "canInterpolateInputs": "false",
+            },
+        )
+    )
+    for element in interfaces if source_files else ():
+        files = ET.SubElement(element, "SourceFiles")
+        for name in source_files or ():
+            ET.SubElement(files, "File", {"name": name})
+    used = sorted({v.unit for v in variables if v.unit})
+    unknown = [u for u in used if u not in QUANTITIES]
+    if unknown:
+        raise ValueError(f"units {unknown} have no quantity in QUANTITIES")
+    add_unit_definitions(root, used)
+    _type_definitions(root, used, variables)
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(cats, "Category", {"name": name, "description": text})
+    ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
+    mv = ET.SubElement(root, "ModelVariables")
+    for vr, v in enumerate(variables):
+        attrs = {
+            "name": v.name,
+            "valueReference": str(vr),
+            "description": v.description,
+            "causality": v.causality,
+            "variability": v.fmi_variability,
+        }
+        if v.causality in ("output", "local"):
+            attrs["initial"] = "calculated"
+        sv = ET.SubElement(mv, "ScalarVariable", attrs)
+        type_attrs: dict[str, str] = {}
+        if v.enumeration:
+            type_attrs["declaredType"] = v.enumeration.name
+            if not FMI_ENUMERATIONS:
+                type_attrs.update(min="1", max=str(len(v.enumeration.items)))
+        if v.unit and v.type == "Real":
+            type_attrs["declaredType"] = QUANTITIES[v.unit]
+        if v.derivative:
+            type_attrs["derivative"] = str(index[v.derivative])
+        if v.unit and v.type == "Real":
+            type_attrs["unit"] = v.unit
+            if v.unit in DISPLAY_UNITS:
+                type_attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
+        if v.min is not None:
+            type_attrs["min"] = xml_value(v.min)
+        if v.max is not None:
+            type_attrs["max"] = xml_value(v.max)
+        if v.causality not in ("output", "local"):
+            type_attrs["start"] = xml_value(v.start)
+        ET.SubElement(sv, v.fmi_type, type_attrs)
+    ms = ET.SubElement(root, "ModelStructure")
+    outs = ET.SubElement(ms, "Outputs")
+    if output_dependencies == "" and model_exchange:
+        # the knowns are the inputs and the continuous states (FMI 2.0, section 2.2.8)
+        output_dependencies = " ".join(str(index[s]) for s in model_exchange.states)
+    if output_dependencies == SAMPLED_INPUTS:
+        inputs = [str(i + 1) for i, v in enumerate(variables) if v.causality == "input"]
+        deps = {"dependencies": " ".join(inputs),
+                "dependenciesKind": " ".join(["discrete"] * len(inputs))}  # fmt: skip
+    elif output_dependencies is None:
+        deps = {}
+    else:
+        deps = {"dependencies": output_dependencies}
+    for i, v in enumerate(variables):
+        if v.causality == "output":
+            ET.SubElement(outs, "Unknown", {"index": str(i + 1), **deps})
+    if model_exchange and model_exchange.states:
+        ders = ET.SubElement(ms, "Derivatives")
+        for v in variables:
+            if v.derivative:  # depends on states and inputs: no dependencies list (all knowns)
+                ET.SubElement(ders, "Unknown", {"index": str(index[v.name])})
+    inits = ET.SubElement(ms, "InitialUnknowns")
+    for i, v in enumerate(variables):
+        if v.causality == "output" or v.derivative:
+            ET.SubElement(inits, "Unknown", {"index": str(i + 1)})
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _type_definitions(root: ET.Element, units: list[str], variables: list[Variable]) -> None:
+    """TypeDefinitions: one Real SimpleType per unit used (its quantity, unit and display unit)
+    and every Enumeration the variables declare."""
+    types = ET.SubElement(root, "TypeDefinitions")
+    for u in units:
+        attrs = {"quantity": QUANTITIES[u], "unit": u}
+        if u in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[u][0]
+        ET.SubElement(ET.SubElement(types, "SimpleType", {"name": QUANTITIES[u]}), "Real", attrs)
+    enums = {v.enumeration.name: v.enumeration for v in variables if v.enumeration}
+    for e in enums.values():
+        if not FMI_ENUMERATIONS:  # an Integer type documenting the values
+            text = f"{e.description}: {e.choices()}"
+            st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": text})
+            ET.SubElement(st, "Integer", {"min": "1", "max": str(len(e.items))})
+            continue
+        st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": e.description})
+        items = ET.SubElement(st, "Enumeration")
+        for k, (name, text) in enumerate(e.items, 1):
+            ET.SubElement(items, "Item", {"name": name, "value": str(k), "description": text})
+
+
+def xml_value(value: float | int | bool | str) -> str:
+    """A start, min or max value as FMI writes it (true/false, INF, the shortest float repr)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isinf(value):
+            return "INF" if value > 0 else "-INF"
+        return repr(value)
+    return str(value)

@@ -20,7 +20,8 @@ import time
 
 from master_speed import time_fmpy
 
-from impedance_cosim.apps import sweep, sweep_batch
+from impedance_cosim.apps import sweep
+from impedance_cosim.apps.sweep import execute as sweep_batch
 from impedance_cosim.cosim.loop import run_models
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp

@@ -1,7 +1,28 @@
 """Impedance control without velocity measurements, as FMI co-simulation components.
 
-This package's model modules (arm, wall, ode, linalg3, fmi) are bundled into the FMUs and must
-import nothing beyond the standard library (and pythonfmu in fmi.slave).
+The Python API: `impedance_cosim.simulate(...)` runs a scenario and returns a `Result` (signals,
+summary, provenance); `impedance_cosim.sweep(...)` runs it over values of one parameter (see
+impedance_cosim/api.py).
+
+This package's model modules (physics, fmi) and this file are bundled into the FMUs and must
+import nothing beyond the standard library (and pythonfmu in fmi.slave): the API is imported
+only when first used (module __getattr__), so `import impedance_cosim` stays light.
 """
 
 __version__ = "0.1.0"
+
+_API = ("simulate", "sweep", "Result", "RunFailedError")
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str):
+    """simulate, sweep, Result, RunFailedError from impedance_cosim.api, imported on first use."""
+    if name in _API:
+        from impedance_cosim import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_API})

@@ -43,12 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures")
     add_run_options(p)
     p.set_defaults(func=run_cmd.cmd_run)
-    from impedance_cosim.apps import sweep
+    from impedance_cosim.apps.sweep import command as sweep_command
 
-    sweep.add_parser(sub)
-    from impedance_cosim.apps import stability_study
+    sweep_command.add_parser(sub)
+    from impedance_cosim.apps.sweep import stability_command
 
-    stability_study.add_parser(sub)
+    stability_command.add_parser(sub)
     from impedance_cosim.apps.hil import add_parsers as add_hil_parsers
 
     add_hil_parsers(sub)

@@ -38,7 +38,7 @@ def test_options_reach_the_master(ssp_path, tmp_path):
 def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
     out = tmp_path / "res"
     args = ["run", "--ssp", str(ssp_path), "--stop", "5", "--out", str(out), "--set"]
-    assert main([*args, "controller.G=1e9"]) == 1
+    assert main([*args, "controller.G=1e9", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "error:" in err
     rows = read_csv(out / "observer.csv")

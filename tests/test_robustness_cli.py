@@ -29,9 +29,12 @@ def cli(*args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedP
     )
 
 
+PROGRESS = re.compile(r"^\S+: +\d+% \d+/\d+ \[")  # util.progress's plain lines (not a terminal)
+
+
 def one_line(stderr: str) -> str:
-    """The single line on stderr (asserts there is exactly one and no traceback)."""
-    lines = stderr.strip().splitlines()
+    """The single line on stderr besides progress lines (asserts exactly one, no traceback)."""
+    lines = [ln for ln in stderr.strip().splitlines() if not PROGRESS.match(ln)]
     assert "Traceback" not in stderr and len(lines) == 1, stderr
     return lines[0]
 

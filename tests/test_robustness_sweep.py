@@ -19,12 +19,14 @@ import psutil
 import pytest
 
 from impedance_cosim.apps import sweep
-from impedance_cosim.apps.sweep_table import SweepTable, read_table
+from impedance_cosim.apps.sweep.table import SweepTable, read_table
 from impedance_cosim.cli import main
 
 
 def sweep_command(*args: str) -> list[str]:
-    return [sys.executable, "-m", "impedance_cosim.cli", "sweep", "--no-plots", *args]
+    """The sweep command in a subprocess; stderr holds only errors (no progress lines)."""
+    return [sys.executable, "-m", "impedance_cosim.cli", "sweep", "--no-plots", "--no-progress",
+            *args]  # fmt: skip
 
 
 def data_rows(table: Path) -> int:
@@ -237,7 +239,7 @@ def test_a_second_sweep_on_the_same_table_is_refused(native_ssp, tmp_path, capsy
     out.mkdir()
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time\n"
-         "from impedance_cosim.apps.sweep_table import _lock\n"
+         "from impedance_cosim.apps.sweep.table import _lock\n"
          "from pathlib import Path\nwith _lock(Path(sys.argv[1])): print('locked', flush=True); "
          "time.sleep(60)", str(out / "sweep.csv.lock")],
         stdout=subprocess.PIPE, text=True,

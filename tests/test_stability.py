@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impedance_cosim.apps import fig4, linearize, stability
-from impedance_cosim.apps.stability_study import read_csv
+from impedance_cosim.apps import fig4, linearize
+from impedance_cosim.apps.sweep import stability
+from impedance_cosim.apps.sweep.stability_command import read_csv
 from impedance_cosim.cosim.loop import loop_step
 from impedance_cosim.physics.ode import integrate
 
@@ -55,6 +56,25 @@ def test_bisection_without_boundary_says_which_side():
     assert row["note"].startswith("stable over the whole bracket")
     (row,) = fake_study([case], lambda c, x: False)
     assert row["note"].startswith("unstable over the whole bracket")
+
+
+def test_bisection_progress_counts_runs_and_finished_bisections():
+    """progress(runs, bisections finished) after every run; no bisection over max_runs."""
+    todo = [stability.Case(q, "observer", "jacobi", "ideal") for q in ("rate", "wall_k")]
+    queue, calls = [], []
+
+    def wait():
+        case, x = queue.pop(0)
+        stable = x >= 243.0 if case.quantity == "rate" else x < 2e6
+        return case, x, {"status": "ok" if stable else "diverged"}
+
+    done = stability.bisect_all(todo, lambda c, x: queue.append((c, x)), wait,
+                                lambda runs, finished: calls.append((runs, finished)))  # fmt: skip
+    total = sum(len(b.runs) for b in done)
+    assert [r for r, _ in calls] == list(range(1, total + 1))
+    assert calls[-2][1] == 1 and calls[-1][1] == 2  # the first finished one run before the end
+    assert all(f == 0 for _, f in calls[: min(len(b.runs) for b in done) - 1])
+    assert all(2 < len(b.runs) <= stability.max_runs(b.case.quantity) for b in done)
 
 
 def test_case_points_and_selection():

@@ -89,6 +89,27 @@ def test_serial_rows_and_failed_runs_are_rows(native_ssp):
     assert rows[1]["error"] and rows[0]["peak_torque_N_m"] > 0
 
 
+def test_progress_is_plain_lines_off_a_terminal_and_off_with_no_progress(
+    native_ssp, tmp_path, capsys, monkeypatch
+):
+    """stderr is not a terminal here: the progress display prints plain lines (runs done, how
+    many not bounded; no delay here, 1 s by default); nothing with --no-progress."""
+    from functools import partial
+
+    from impedance_cosim.apps.sweep import execute
+    from impedance_cosim.util.progress import Progress
+
+    monkeypatch.setattr(execute, "Progress", partial(Progress, delay=0.0, every=0.0))
+    args = ["sweep", "--serial", "--no-plots", "--ssp", str(native_ssp), "--stop", "0.5",
+            "--grid", "controller.velocity_source=observer,7"]  # fmt: skip
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[-1].startswith("sweep: 100%") and "2/2" in lines[-1], lines
+    assert "1 not bounded" in lines[-1] and "\r" not in "".join(lines)
+    assert main([*args, "--out", str(tmp_path / "b"), "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_pseudo_parameters_map_to_the_master():
     options = {"plant_friction": [27.4, 4.54, 5.0], "stop": 2.0}
     args = sweep.master_arguments(

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impedance_cosim.apps import sweep, sweep_batch
+from impedance_cosim.apps import sweep
+from impedance_cosim.apps.sweep import execute as sweep_batch
 from impedance_cosim.cosim.fmu_pool import InstancePool
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp

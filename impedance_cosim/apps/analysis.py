@@ -12,11 +12,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from impedance_cosim.physics.arm import ArmParams
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 Signals = Mapping[str, np.ndarray]
 TARGET_FORCE = 1e4 * 0.00196
@@ -131,19 +134,25 @@ def format_summary(values: dict[str, Any]) -> str:
 
 
 def _axes(rows: int, cols: int, title: str):
-    import matplotlib
+    """A figure of rows x cols axes, made without pyplot (no backend switch, no global state:
+    safe inside a notebook or a program with its own plots)."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(rows, cols, figsize=(11, 7.5), constrained_layout=True)
+    fig = Figure(figsize=(11, 7.5), layout="constrained")
     fig.suptitle(title)
-    return plt, fig, axes.ravel()
+    return fig, fig.subplots(rows, cols).ravel()
 
 
-def figure_1(s: Signals, path: Path) -> None:
+def _finish(fig: Figure, path: Path | None) -> Figure:
+    """Save the figure to path (when given) and return it (a notebook shows it)."""
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
+def figure_1(s: Signals, path: Path | None = None) -> Figure:
     """Fig. 1: (a) desired vs actual path, (b) contact detail, (c) joint torques, (d) force."""
-    plt, fig, ax = _axes(2, 2, "Fig. 1 - position and force tracking")
+    fig, ax = _axes(2, 2, "Fig. 1 - position and force tracking")
     t = s["time"]
     xv, yv = at_samples(s, "controller.x_v"), at_samples(s, "controller.y_v")
     ax[0].plot(xv, yv, "k-", lw=1, label="virtual trajectory $x_v$")
@@ -169,13 +178,12 @@ def figure_1(s: Signals, path: Path) -> None:
     ax[3].axhline(TARGET_FORCE, color="k", lw=0.8, ls=":", label="target 19.6 N")
     ax[3].set(xlabel="t [s]", ylabel="force [N]", title="(d) desired vs actual contact force")
     ax[3].legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return _finish(fig, path)
 
 
-def figure_2(s: Signals, path: Path) -> None:
+def figure_2(s: Signals, path: Path | None = None) -> Figure:
     """Fig. 2: observed vs actual Cartesian velocity (a, b) and observer error (c, d)."""
-    plt, fig, ax = _axes(2, 2, "Fig. 2 - velocity observer (eq. 9)")
+    fig, ax = _axes(2, 2, "Fig. 2 - velocity observer (eq. 9)")
     t = s["time"]
     obs = cartesian_velocity(s, "controller.qd_obs")
     for k, axis in enumerate("xy"):
@@ -188,13 +196,12 @@ def figure_2(s: Signals, path: Path) -> None:
         ax[k + 2].plot(t[:-1], obs[:-1, k] - actual[:-1], "b-", lw=0.8)
         ax[k + 2].set(xlabel="t [s]", ylabel="error [m/s]",
                       title=f"({'cd'[k]}) observer error, {axis}-direction")  # fmt: skip
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return _finish(fig, path)
 
 
-def figure_3(s: Signals, path: Path) -> None:
+def figure_3(s: Signals, path: Path | None = None) -> Figure:
     """Fig. 3: desired vs actual velocity (a, b) and velocity tracking error (c, d)."""
-    plt, fig, ax = _axes(2, 2, "Fig. 3 - velocity tracking")
+    fig, ax = _axes(2, 2, "Fig. 3 - velocity tracking")
     t = s["time"]
     for k, axis in enumerate("xy"):
         desired = at_samples(s, f"controller.{axis}d_v")
@@ -207,14 +214,13 @@ def figure_3(s: Signals, path: Path) -> None:
         ax[k + 2].plot(t[:-1], (actual - desired)[:-1], "b-", lw=0.8)
         ax[k + 2].set(xlabel="t [s]", ylabel="error [m/s]",
                       title=f"({'cd'[k]}) velocity tracking error, {axis}-direction")  # fmt: skip
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return _finish(fig, path)
 
 
-def figure_4(observer_run: Signals, difference_run: Signals, path: Path) -> None:
+def figure_4(observer_run: Signals, difference_run: Signals, path: Path | None = None) -> Figure:
     """Fig. 4: x-velocity with the observer in the loop (a) vs with numerical differentiation in
     the loop (b), over the whole run and over 0.25 s from the first contact."""
-    plt, fig, ax = _axes(2, 2, "Fig. 4 - observer vs numerical differentiation in the loop")
+    fig, ax = _axes(2, 2, "Fig. 4 - observer vs numerical differentiation in the loop")
     runs = ((observer_run, "controller.qd_obs", "observed"),
             (difference_run, "controller.qd_diff", "numerical differentiation"))  # fmt: skip
     for k, (s, prefix, label) in enumerate(runs):
@@ -230,5 +236,4 @@ def figure_4(observer_run: Signals, difference_run: Signals, path: Path) -> None
             title = f"({'ab'[k]}) actual vs {label}" if j == 0 else zoom
             axis.set(xlabel="t [s]", ylabel="x-velocity [m/s]", title=title)
             axis.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return _finish(fig, path)

@@ -67,7 +67,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     from impedance_cosim.util.interrupt import RunInterrupted
 
     system = args.system = read_ssp(ssp)  # closed by _dispatch()
-    progress = sys.stderr.isatty() and not args.no_progress
+    progress = not args.no_progress  # a bar on a terminal, plain periodic lines otherwise
     runs: list[dict] = []  # provenance of each run, written to run.json on every exit path
     started, t0 = provenance.now_utc(), time.perf_counter()
 

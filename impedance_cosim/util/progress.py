@@ -32,7 +32,7 @@ class Progress:
         self.start = time.perf_counter()
         self.n, self.postfix = 0, ""
         self._last_line = self.start + delay - every  # first plain line once `delay` has passed
-        self._printed = False
+        self._printed, self._printed_n = False, -1
         self._bar: tqdm | None = None
         if enabled and _is_terminal(self.stream):
             self._bar = tqdm(total=total, desc=desc, unit=unit, file=self.stream, delay=delay,
@@ -58,7 +58,7 @@ class Progress:
         if self._bar is not None:
             self._bar.close()
             self._bar = None
-        elif self.enabled and self._printed:
+        elif self.enabled and self._printed and self.n != self._printed_n:
             self._line(time.perf_counter())
         self.enabled = False
 
@@ -76,7 +76,7 @@ class Progress:
             self.stream.flush()
         except (OSError, ValueError):  # a closed or broken stream must not end the run
             self.enabled = False
-        self._printed = True
+        self._printed, self._printed_n = True, self.n
 
 
 def _is_terminal(stream: TextIO) -> bool:

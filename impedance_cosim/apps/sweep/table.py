@@ -2,6 +2,7 @@
 table sorted by run and renamed into place at the end, a lock against a second sweep writing the
 same table, and resuming from a table without redoing its finished runs.
 
+The columns: run number, swept values, status, error, metrics (metrics.METRICS), wall time.
 Beside `sweep.csv` sit `sweep.plan.json` (what the table is a sweep of: archive digest, axes,
 points, options; checked on --resume) and, while a sweep writes it, `sweep.csv.lock`.
 Errors are TableError (a ValueError: one line from the CLI).
@@ -19,23 +20,15 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from impedance_cosim.apps.sweep.metrics import METRICS
+from impedance_cosim.apps.sweep.plan import Plan, archive_payload, parse_value
+
 FINISHED = ("ok", "diverged", "failed")  # a row with one of these is not run again on --resume
 PLAN_FORMAT = 1
 
 
 class TableError(ValueError):
     """The table cannot be written, locked or resumed: one line."""
-
-
-def parse_value(text: str) -> Any:
-    """A table cell or command-line value: int, float or the text itself."""
-    text = text.strip()
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
 
 
 def format_cell(value: Any) -> str:
@@ -64,18 +57,6 @@ def replace_text(path: Path, text: str) -> None:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-
-
-def save_figure(fig: Any, path: Path, **kwargs: Any) -> None:
-    """fig.savefig to a temporary name beside path, then renamed into place."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        fig.savefig(tmp, **kwargs)
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(FileNotFoundError):
@@ -316,3 +297,15 @@ class SweepTable:
         if not isinstance(plan, dict):
             raise TableError(f"{path} is not a sweep's plan")
         return plan
+
+
+def columns(plan_axes: Iterable[str]) -> list[str]:
+    """The table's columns: run number, swept values, status, error, metrics, wall time."""
+    return ["run", *plan_axes, "status", "error", *METRICS, "wall_s"]
+
+
+def open_table(path: Path, plan: Plan, resume: bool = False) -> SweepTable:
+    """The plan's table at path, to use in a with-block (rows written as runs finish)."""
+    options = {k: v for k, v in plan.options.items() if k != "plant_friction"}
+    record = plan_record(archive_payload(plan.ssp)[1], plan.axes, plan.points, options, plan.mode)
+    return SweepTable(path, columns(plan.axes), record, plan.points, resume=resume)

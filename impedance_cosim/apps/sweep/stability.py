@@ -17,6 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from impedance_cosim.apps.sweep.plan import master_arguments
+from impedance_cosim.apps.sweep.worker import prepare_worker, run_point
+
 SOURCES = ("observer", "difference", "measured")
 TIMINGS = ("gauss-seidel", "jacobi")  # sample-and-hold; torque one sample late
 DISCRETIZATIONS = ("euler", "implicit", "exponential")
@@ -168,10 +171,11 @@ def bisect_all(
     todo: list[Case],
     submit: Callable[[Case, float], Any],
     wait: Callable[[], tuple[Case, float, dict]],
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[Bisection]:
     """Drive every case's bisection: submit(case, x) starts a run, wait() returns one finished
-    run (case, x, row). Returns the finished bisections in the order of todo."""
+    run (case, x, row); progress(runs finished, bisections finished) after each. Returns the
+    finished bisections in the order of todo."""
     state = {c: Bisection(c, *QUANTITIES[c.quantity][0]) for c in todo}
     flying: set[tuple[Case, float]] = set()
 
@@ -183,22 +187,30 @@ def bisect_all(
 
     for b in state.values():
         feed(b)
-    done = 0
+    done = finished = 0
     while flying:
         case, x, row = wait()
         flying.discard((case, x))
         state[case].record(x, *_stable(row))
         done += 1
-        if progress:
-            progress(done)
         feed(state[case])
+        finished += not any(c == case for c, _ in flying)
+        if progress:
+            progress(done, finished)
     return [state[c] for c in todo]
+
+
+def max_runs(quantity: str) -> int:
+    """The most runs one bisection of this quantity takes: both ends, then halving the bracket
+    (its logarithm for a log-scale bisection) until the tolerance."""
+    (lo, hi), _stable_end, log, tol = QUANTITIES[quantity]
+    width = math.log(hi / lo) / math.log(1 + tol) if log else (hi - lo) / tol
+    return 2 + math.ceil(math.log2(width)) + (not log)  # +1: the linear midpoint is floored
 
 
 def check_cases(todo: list[Case], ssp: Path, options: dict[str, Any]) -> None:
     """Configure (not run) a Master for both ends of every case, so that a parameter the system
     lacks is one clear error now, not a bracket of "unstable" runs."""
-    from impedance_cosim.apps.sweep import master_arguments
     from impedance_cosim.cosim.master import Master
     from impedance_cosim.cosim.ssp import read_ssp
 
@@ -213,12 +225,10 @@ def run_study(
     ssp: Path,
     stop: float = 20.0,
     client=None,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Every case's bisection, on the dask client's workers (serially in this process when
-    client is None); the table rows in the order of todo."""
-    from impedance_cosim.apps import sweep
-
+    client is None); the table rows in the order of todo; progress as in bisect_all."""
     data = Path(ssp).read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     options = {"stop": stop, "divergence_limit": 1e6}
@@ -231,19 +241,19 @@ def run_study(
 
         def wait() -> tuple[Case, float, dict]:
             case, x = queue.pop(0)
-            return case, x, sweep.run_point(data, digest, case.point(x), options)
+            return case, x, run_point(data, digest, case.point(x), options)
 
         return [b.row() for b in bisect_all(todo, submit, wait, progress)]
 
     from distributed import as_completed
 
     payload = client.scatter(data, broadcast=True, hash=False)
-    client.run(sweep.prepare_worker, data, digest)
+    client.run(prepare_worker, data, digest)
     running: dict[str, tuple[Case, float]] = {}
     stream = as_completed([])
 
     def submit_d(case: Case, x: float) -> None:
-        f = client.submit(sweep.run_point, payload, digest, case.point(x), options, pure=False)
+        f = client.submit(run_point, payload, digest, case.point(x), options, pure=False)
         running[f.key] = (case, x)
         stream.add(f)
 

@@ -9,6 +9,7 @@ observer discretizations at 400 Hz, docs/observer_discretization.csv).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import hashlib
 import math
@@ -18,7 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.apps import stability as st
+from impedance_cosim.apps.sweep import stability as st
+from impedance_cosim.apps.sweep.plan import default_ssp
+from impedance_cosim.apps.sweep.worker import run_point
+from impedance_cosim.util.progress import Progress
 
 PARTS = ("boundaries", "linear", "fig4", "gain")
 LINEAR_COLUMNS = ["velocity", "timing", "predicted_free_Hz", "predicted_contact_Hz",
@@ -55,12 +59,19 @@ def write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> Non
 def boundaries(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
     todo = st.cases(args.quantity or tuple(st.QUANTITIES), args.sensor or tuple(st.SENSORS),
                     args.velocity or st.SOURCES, args.timing or st.TIMINGS)  # fmt: skip
-    if args.serial:
-        return st.run_study(todo, ssp, args.stop)
-    from impedance_cosim.apps.sweep import dask_client
+    most = sum(st.max_runs(c.quantity) for c in todo)
+    with contextlib.ExitStack() as stack:
+        client = None
+        if not args.serial:
+            from impedance_cosim.apps.sweep.cluster import dask_client
 
-    with dask_client(workers=args.workers) as client:
-        return st.run_study(todo, ssp, args.stop, client)
+            client = stack.enter_context(dask_client(workers=args.workers))
+        display = stack.enter_context(Progress(most, "stability", "run", not args.no_progress))
+
+        def progress(runs: int, finished: int) -> None:
+            display.update(runs, f"{finished}/{len(todo)} bisections done (at most {most} runs)")
+
+        return st.run_study(todo, ssp, args.stop, client, progress)
 
 
 def linear(args: argparse.Namespace, ssp: Path, simulated: list[dict]) -> list[dict[str, Any]]:
@@ -204,8 +215,6 @@ def fig4_part(args: argparse.Namespace, ssp: Path, out: Path) -> list[dict[str, 
 def gain(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
     """Each observer discretization at 400 Hz (sample-and-hold) over a range of K, with ideal and
     1e-3 rad noisy encoders: the sweep's metrics (peak torque, settled force, noise)."""
-    from impedance_cosim.apps import sweep
-
     data = ssp.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     rows = []
@@ -215,7 +224,7 @@ def gain(args: argparse.Namespace, ssp: Path) -> list[dict[str, Any]]:
                 point = {"system.scenario": "observer", "system.rate": 400,
                          "controller.observer_discretization": d, **st.SENSORS[sensor],
                          **{f"controller.K{i}": k for i in (1, 2, 3)}}  # fmt: skip
-                r = sweep.run_point(data, digest, point, {"stop": args.stop})
+                r = run_point(data, digest, point, {"stop": args.stop})
                 rows.append({"discretization": d, "K": k, "sensor": sensor, **r})
     return rows
 
@@ -259,12 +268,12 @@ def add_parser(sub) -> None:
     p.add_argument("--serial", action="store_true", help="no dask: the runs in this process")
     p.add_argument("--workers", type=int, default=None, help="LocalCluster workers")
     p.add_argument("--no-figures", action="store_true", help="only the tables")
+    p.add_argument("--no-progress", action="store_true", help="no progress display")
     p.set_defaults(func=_cmd_stability)
 
 
 def _cmd_stability(args: argparse.Namespace) -> int:
     from impedance_cosim.apps import fig4
-    from impedance_cosim.apps.sweep_cli import _default_ssp
 
     args.parts = args.parts or list(PARTS)
     for part in args.parts:
@@ -280,7 +289,7 @@ def _cmd_stability(args: argparse.Namespace) -> int:
         raise st.StabilityError(  # so that every whole-Hz rate divides the run
             f"--stop must be a whole number of seconds >= 1 (got {args.stop})"
         )
-    ssp = Path(args.ssp) if args.ssp else _default_ssp()
+    ssp = Path(args.ssp) if args.ssp else default_ssp()
     if not ssp.is_file():
         raise FileNotFoundError(f"no system archive {ssp}")
     out = Path(args.out)

@@ -17,28 +17,21 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from impedance_cosim.apps import sweep
-from impedance_cosim.apps.sweep import (
-    DEFAULT_PLOTS,
+from impedance_cosim.apps.sweep.execute import RunProgress, RunsLostError, run_plan
+from impedance_cosim.apps.sweep.maps import DEFAULT_PLOTS, label, plot_map
+from impedance_cosim.apps.sweep.metrics import METRICS
+from impedance_cosim.apps.sweep.plan import (
     DEFAULT_SSP,
     MAX_RUNS,
-    METRICS,
-    STUDY,
-    ProgressBar,
-    RunInterruptedError,
-    RunsLostError,
     SweepError,
-    _label,
-    check_scheduler,
-    dask_client,
+    default_ssp,
     known_parameters,
     parse_axis,
     plan_sweep,
-    plot_map,
-    run_plan,
-    run_study,
-    sweep_table,
 )
+from impedance_cosim.apps.sweep.study import STUDY, run_study
+from impedance_cosim.apps.sweep.table import open_table
+from impedance_cosim.apps.sweep.worker import STOP, RunInterruptedError
 from impedance_cosim.cosim.master import ALGORITHMS
 
 
@@ -113,7 +106,11 @@ def add_parser(sub) -> None:
         help=f"metric to map (repeatable; default {', '.join(DEFAULT_PLOTS)})",
     )
     p.add_argument("--no-plots", action="store_true", help="only the table")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress display (a bar on a terminal, a line every 10 s otherwise)",
+    )
     p.add_argument(
         "--study",
         nargs="*",
@@ -133,28 +130,17 @@ def add_parser(sub) -> None:
     p.set_defaults(func=_cmd_sweep)
 
 
-def _default_ssp() -> Path:
-    from impedance_cosim.apps.run import stale
-
-    if stale(DEFAULT_SSP):
-        from impedance_cosim.packaging.build_all import build_all
-
-        print("building the FMUs and the system archives ...", file=sys.stderr)
-        build_all(DEFAULT_SSP.parent, None)
-    return DEFAULT_SSP
-
-
 @contextlib.contextmanager
 def stop_on_signals() -> Iterator[None]:
-    """While active (main thread only), SIGINT and SIGTERM set sweep.STOP and raise
+    """While active (main thread only), SIGINT and SIGTERM set STOP and raise
     KeyboardInterrupt, so every with-block (table, cluster) closes on the way out."""
-    sweep.STOP["signal"] = None
+    STOP["signal"] = None
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handle(signum: int, _frame: object) -> None:
-        sweep.STOP["signal"] = sweep.STOP["signal"] or signal.Signals(signum).name
+        STOP["signal"] = STOP["signal"] or signal.Signals(signum).name
         raise KeyboardInterrupt
 
     names = [s for s in ("SIGINT", "SIGTERM") if hasattr(signal, s)]
@@ -164,7 +150,7 @@ def stop_on_signals() -> Iterator[None]:
     finally:
         for s, handler in previous.items():
             signal.signal(getattr(signal, s), handler if handler is not None else signal.SIG_DFL)
-        sweep.STOP["signal"] = None
+        STOP["signal"] = None
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -221,7 +207,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             return 1
         except (KeyboardInterrupt, RunInterruptedError) as exc:
             signum = getattr(exc, "signum", None)  # the master's own interruption carries it
-            name = sweep.STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
+            name = STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
             news = _kept(tables) if tables else "before any run started"
             lead = "\n" if sys.stderr.isatty() else ""
             print(f"{lead}impedance-cosim sweep: interrupted by {name}: {news}", file=sys.stderr)
@@ -230,18 +216,22 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace, tables: list) -> int:
     if args.scheduler:  # before anything else: fail fast
+        from impedance_cosim.apps.sweep.cluster import check_scheduler
+
         check_scheduler(args.scheduler, args.connect_timeout)
     ssp = Path(args.ssp) if args.ssp else None
     if args.list_parameters:
         from impedance_cosim.cosim.ssp import read_ssp
 
-        for name, text in known_parameters(read_ssp(ssp or _default_ssp())).items():
+        for name, text in known_parameters(read_ssp(ssp or default_ssp())).items():
             print(f"{name:28} {text}")
         return 0
-    progress = sys.stderr.isatty() and not args.no_progress
+    progress = not args.no_progress
     out = Path(args.out)
 
     def client():
+        from impedance_cosim.apps.sweep.cluster import dask_client
+
         return dask_client(args.scheduler, args.workers, args.connect_timeout)
 
     factory = None if args.serial else client
@@ -249,7 +239,7 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         if args.grid or args.random is not None:
             raise SweepError("--study runs its own grids: give it no --grid/--random")
         names = args.study or list(STUDY)
-        ssp = ssp or _default_ssp()
+        ssp = ssp or default_ssp()
         started = time.perf_counter()
         written = run_study(names, out, ssp, factory, progress, args.stop, args.resume, tables)
         print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
@@ -260,7 +250,7 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         raise SweepError("nothing to sweep: give at least one --grid component.variable=values")
     plan = plan_sweep(
         args.grid,
-        ssp=ssp or _default_ssp(),
+        ssp=ssp or default_ssp(),
         random_runs=args.random,
         seed=args.seed,
         fixed=args.set,
@@ -271,13 +261,15 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
     )
     path = out / "sweep.csv"
     started = time.perf_counter()
-    with sweep_table(path, plan, args.resume) as table:
+    with open_table(path, plan, args.resume) as table:
         tables.append(table)
         kept = len(table.done)
-        bar = ProgressBar(len(plan.points) - kept, progress)
         idle = len(table.done) == len(plan.points) or not factory
-        with contextlib.nullcontext() if idle else factory() as c:
-            rows = run_plan(plan, table, c, bar)
+        with (
+            contextlib.nullcontext() if idle else factory() as c,
+            RunProgress(len(plan.points) - kept, progress) as tick,
+        ):
+            rows = run_plan(plan, table, c, tick)
     elapsed = time.perf_counter() - started
     bad = [r for r in rows if r["status"] != "ok"]
     resumed = f" ({kept} kept from the table)" if args.resume else ""
@@ -286,7 +278,7 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         f"{len(bad)} not -> {path}"
     )
     for r in bad[:10]:
-        where = ", ".join(f"{k}={_label(r[k])}" for k in plan.axes)
+        where = ", ".join(f"{k}={label(r[k])}" for k in plan.axes)
         print(f"  {where}: {r['status']}: {r['error']}")
     if len(bad) > 10:
         print(f"  ... and {len(bad) - 10} more (see the table)")

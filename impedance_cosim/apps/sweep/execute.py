@@ -1,41 +1,86 @@
-"""Sweeps that scale for fast runs: several runs per dask task, FMU instances reused in a worker.
+"""Running a sweep's plan: in series in this process (the reference), or on dask with several
+runs per task and FMU instances reused in a worker.
 
 A 20 s run of the native FMUs takes ~40 ms; one dask task per run spent a large part of that on
-task overhead. Here each task runs a batch of points (run_batch) sized from the cost measured so
-far: the runs' wall time per master step, aiming at `target_s` per task (a few hundred ms), and
-smaller towards the end so that no worker idles while another finishes a long batch (guided
-self-scheduling). At most two batches per worker are in flight, so sizes follow the measurements.
-Each worker keeps its FMU instances between runs (fmu_pool: fmi2Reset instead of a new
-instance). Rows are recorded as their batch finishes (Ctrl-C keeps every finished batch); a batch
-whose task failed (e.g. its worker died) is run again one point per task, so a crashing point
-costs only its own row; runs that dask cancelled are lost (RunsLostError)."""
+task overhead. Here each task runs a batch of points (worker.run_batch) sized from the cost
+measured so far: the runs' wall time per master step, aiming at `target_s` per task (a few
+hundred ms), and smaller towards the end so that no worker idles while another finishes a long
+batch (guided self-scheduling). At most two batches per worker are in flight, so sizes follow the
+measurements. Each worker keeps its FMU instances between runs (fmu_pool: fmi2Reset instead of a
+new instance). Rows are recorded as their batch finishes (Ctrl-C keeps every finished batch); a
+batch whose task failed (e.g. its worker died) is run again one point per task, so a crashing
+point costs only its own row; runs that dask cancelled are lost (RunsLostError)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from typing import Any
 
-from impedance_cosim.cosim.fmu_pool import InstancePool
+from impedance_cosim.apps.sweep.metrics import METRICS
+from impedance_cosim.apps.sweep.plan import Plan, archive_payload, master_arguments
+from impedance_cosim.apps.sweep.worker import (
+    RunInterruptedError,
+    prepare_worker,
+    run_batch,
+    run_point,
+)
+from impedance_cosim.util.progress import Progress
 
 TARGET_S = 0.3  # aimed wall time of one task
 IN_FLIGHT = 2  # batches submitted per worker
 
-POOL = InstancePool()  # per worker process: FMU instances reused across runs
+Record = Callable[[int, dict], None]  # record(index in the plan, row) as a run finishes
+ProgressHook = Callable[[int, dict], None]  # progress(runs finished so far, the last row)
 
 
-def run_batch(payload: bytes | str, digest: str, points: Sequence[dict], options: dict) -> list:
-    """The sweep rows of several points, one after another in this process (on a worker), with
-    its FMU instances reused from run to run."""
-    from impedance_cosim.apps.sweep import run_point
+class RunsLostError(Exception):
+    """Dask cancelled runs (e.g. the scheduler went away): no verdict on those points; the sweep
+    stops after the others (--resume runs them again)."""
 
-    return [run_point(payload, digest, p, options, instances=POOL) for p in points]
+
+class RunProgress:
+    """The progress of a sweep's runs on stderr (util.progress: a tqdm bar on a terminal, plain
+    lines otherwise): runs finished and how many did not stay bounded. A ProgressHook that counts
+    its calls (so one display can follow several plans) and a with-block that closes it."""
+
+    def __init__(self, total: int, enabled: bool = True, desc: str = "sweep") -> None:
+        self.display = Progress(total, desc, "run", enabled=enabled)
+        self.done = self.bad = 0
+
+    def __call__(self, _n: int, row: dict) -> None:
+        self.done += 1
+        self.bad += row.get("status") != "ok"
+        self.display.update(self.done, f"{self.bad} not bounded")
+
+    def __enter__(self) -> RunProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.display.close()
+
+
+def run_serial(
+    plan: Plan,
+    progress: ProgressHook | None = None,
+    indices: Iterable[int] | None = None,
+    record: Record | None = None,
+) -> list[dict]:
+    """The plan's runs (or those at `indices`) one after another in this process (the reference
+    for the dask runs); `record(index, row)` as each finishes."""
+    data, digest = archive_payload(plan.ssp)
+    rows = []
+    for i in range(len(plan.points)) if indices is None else indices:
+        rows.append(run_point(data, digest, plan.points[i], plan.options))
+        if record:
+            record(i, rows[-1])
+        if progress:
+            progress(len(rows), rows[-1])
+    return rows
 
 
 def steps(point: dict, options: dict) -> float:
     """The master steps of a run (relative, for sizing batches: stop / step, 1 where unset)."""
-    from impedance_cosim.apps.sweep import master_arguments
-
     args = master_arguments(point, options)
     return (args["stop_time"] or 1.0) / (args["step_size"] or 1.0)
 
@@ -73,8 +118,6 @@ class Batcher:
 
 
 def _failed_row(point: dict, exc: BaseException) -> dict[str, Any]:
-    from impedance_cosim.apps.sweep import METRICS
-
     row = dict(point)
     reason = " ".join(str(exc).split())
     row.update(status="failed", error=f"task failed: {type(exc).__name__}: {reason}")
@@ -83,11 +126,11 @@ def _failed_row(point: dict, exc: BaseException) -> dict[str, Any]:
 
 
 def run_dask(
-    plan: Any,
+    plan: Plan,
     client: Any,
-    progress: Callable[[int, dict], None] | None = None,
+    progress: ProgressHook | None = None,
     indices: Iterable[int] | None = None,
-    record: Callable[[int, dict], None] | None = None,
+    record: Record | None = None,
     target_s: float = TARGET_S,
 ) -> list[dict]:
     """The plan's runs (or those at `indices`) in batches on the client's workers; rows in the
@@ -97,15 +140,8 @@ def run_dask(
 
     from distributed import as_completed
 
-    from impedance_cosim.apps.sweep import (
-        RunInterruptedError,
-        RunsLostError,
-        _payload,
-        prepare_worker,
-    )
-
     order = list(range(len(plan.points)) if indices is None else indices)
-    data, digest = _payload(plan.ssp)
+    data, digest = archive_payload(plan.ssp)
     payload = client.scatter(data, broadcast=True, hash=False)
     client.run(prepare_worker, data, digest)  # every worker prepares the system once
     workers = len(client.scheduler_info().get("workers", {})) or 1
@@ -157,3 +193,16 @@ def run_dask(
         missing = len(order) - len(rows)
         raise RunsLostError(f"dask lost {missing} of {len(order)} runs ({lost or 'not run'})")
     return [rows[i] for i in order]
+
+
+def run_plan(plan: Plan, table: Any, client: Any, progress: ProgressHook | None) -> list[dict]:
+    """The plan's runs not yet in the table (table.SweepTable), each row into the table as it
+    finishes, on the client's workers (in this process when client is None); all rows (in the
+    plan's order) once every run has finished."""
+    todo = [i for i in range(len(plan.points)) if i not in table.done]
+    if todo:
+        if client is not None:
+            run_dask(plan, client, progress, todo, table.add)
+        else:
+            run_serial(plan, progress, todo, table.add)
+    return [dict(r) for r in table.rows()]

@@ -1,0 +1,195 @@
+"""Maps of a sweep: one metric over the swept axes as a curve, heatmaps or a scatter, with the
+runs that did not stay bounded marked (PNG files, written through a temporary name)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DEFAULT_PLOTS = (
+    "peak_torque_N_m",
+    "settled_force_N",
+    "impact_peak_N",
+    "observer_error_rms_after_2s_m_s",
+    "tracking_error_in_contact_m",
+)
+
+
+def save_figure(fig: Any, path: Path, **kwargs: Any) -> None:
+    """fig.savefig to a temporary name beside path, then renamed into place."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        fig.savefig(tmp, **kwargs)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
+def _short(name: str) -> str:
+    return name.removeprefix("system.")
+
+
+def label(v: Any) -> str:
+    """A swept value as shown in maps and messages (floats to 3 significant digits)."""
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return str(v)
+
+
+def plot_map(
+    rows: list[dict],
+    axes: Sequence[str],
+    metric: str,
+    path: Path,
+    title: str | None = None,
+    log: bool | None = None,
+    mode: str = "grid",
+) -> None:
+    """One metric over the swept axes: a curve (one axis), heatmaps (x = axes[0], y = axes[1],
+    panel rows = axes[2], panel columns = axes[3]) or a scatter (random sweeps). Runs that did not
+    stay bounded are black cells / red crosses labelled with the time they stopped."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm, Normalize
+
+    axes = [a for a in axes if len({label(r[a]) for r in rows}) > 1] or list(axes[:1])
+    values = [r.get(metric) for r in rows if r.get("status") == "ok" and r.get(metric) is not None]
+    positive = [v for v in values if v > 0]
+    if log is None:
+        log = bool(positive) and len(positive) == len(values) and max(values) / min(values) > 30
+    lo, hi = (
+        (min(positive or [1e-12]), max(positive or [1.0]))
+        if log
+        else (min(values or [0.0]), max(values or [1.0]))
+    )
+    norm = LogNorm(lo, max(hi, lo * 1.001)) if log else Normalize(lo, hi if hi > lo else lo + 1)
+    title = title or metric
+
+    def order(name: str) -> list[Any]:
+        seen: dict[str, Any] = {}
+        for r in rows:
+            seen.setdefault(label(r[name]), r[name])
+        return list(seen.values())
+
+    if len(axes) == 1 or mode == "random":
+        fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+        x = axes[0]
+        ok = [r for r in rows if r.get("status") == "ok" and r.get(metric) is not None]
+        bad = [r for r in rows if r.get("status") != "ok"]
+        if len(axes) == 1:
+            ax.plot([r[x] for r in ok], [r[metric] for r in ok], "o-", ms=4)
+            ax.set_ylabel(metric)
+            if log:
+                ax.set_yscale("log")
+            for r in bad:
+                ax.axvline(r[x], color="r", lw=0.8, ls=":")
+                ax.annotate(
+                    f"x {r['status']}",
+                    (r[x], 0.02),
+                    xycoords=("data", "axes fraction"),
+                    color="r",
+                    fontsize=7,
+                    rotation=90,
+                )
+        else:
+            y = axes[1]
+            sc = ax.scatter(
+                [r[x] for r in ok],
+                [r[y] for r in ok],
+                c=[r[metric] for r in ok],
+                norm=norm,
+                cmap="viridis",
+                s=25,
+            )
+            ax.scatter(
+                [r[x] for r in bad],
+                [r[y] for r in bad],
+                marker="x",
+                color="r",
+                s=30,
+                label="not bounded",
+            )
+            fig.colorbar(sc, ax=ax, label=metric)
+            ax.set_ylabel(y)
+            if bad:
+                ax.legend(fontsize=8)
+        numeric = [r[x] for r in rows if isinstance(r[x], int | float) and r[x] > 0]
+        if numeric and len(numeric) == len(rows) and max(numeric) / min(numeric) > 20:
+            ax.set_xscale("log")
+        ax.set_xlabel(x)
+        ax.set_title(title, fontsize=10)
+        save_figure(fig, path, dpi=90)
+        plt.close(fig)
+        return
+
+    x, y = axes[0], axes[1]
+    prow = axes[2] if len(axes) > 2 else None
+    pcol = axes[3] if len(axes) > 3 else None
+    xs, ys = order(x), order(y)
+    rvals = order(prow) if prow else [None]
+    cvals = order(pcol) if pcol else [None]
+    extra = axes[4:]
+    if extra:  # more than four swept axes: one panel per remaining combination, in a row
+        cvals = [None]
+    w = max(3.2, 0.42 * len(xs) + 1.2)
+    h = max(2.4, 0.3 * len(ys) + 1.0)
+    fig, grid = plt.subplots(
+        len(rvals),
+        len(cvals),
+        figsize=(w * len(cvals) + 1.2, h * len(rvals) + 0.6),
+        squeeze=False,
+        constrained_layout=True,
+    )
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="black")
+    image = None
+    annotate = len(xs) <= 14 and len(ys) <= 12
+    for ri, rv in enumerate(rvals):
+        for ci, cv in enumerate(cvals):
+            ax = grid[ri][ci]
+            sel = [
+                r
+                for r in rows
+                if (prow is None or label(r[prow]) == label(rv))
+                and (pcol is None or label(r[pcol]) == label(cv))
+            ]
+            m = np.full((len(ys), len(xs)), np.nan)
+            text: dict[tuple[int, int], tuple[str, str]] = {}
+            xi = {label(v): i for i, v in enumerate(xs)}
+            yi = {label(v): i for i, v in enumerate(ys)}
+            for r in sel:
+                j, i = xi[label(r[x])], yi[label(r[y])]
+                if r.get("status") == "ok" and r.get(metric) is not None:
+                    m[i, j] = r[metric]
+                    text[i, j] = (f"{r[metric]:.3g}", "white")
+                elif r.get("status") == "ok":
+                    text[i, j] = ("-", "0.5")
+                else:
+                    t_end = r.get("t_end_s")
+                    text[i, j] = (f"{t_end:.2g}s" if t_end is not None else "fail", "#ff8080")
+                    m[i, j] = np.nan
+            masked = np.ma.masked_invalid(m)
+            image = ax.imshow(masked, origin="lower", aspect="auto", cmap=cmap, norm=norm)
+            if annotate:
+                for (i, j), (s, colour) in text.items():
+                    ax.text(j, i, s, ha="center", va="center", fontsize=6, color=colour)
+            ax.set_xticks(range(len(xs)), [label(v) for v in xs], fontsize=7, rotation=45)
+            ax.set_yticks(range(len(ys)), [label(v) for v in ys], fontsize=7)
+            ax.set_xlabel(x, fontsize=8)
+            ax.set_ylabel(y, fontsize=8)
+            parts = [f"{_short(prow)}={label(rv)}" if prow else "",
+                     f"{_short(pcol)}={label(cv)}" if pcol else ""]  # fmt: skip
+            ax.set_title(", ".join(p for p in parts if p), fontsize=7)
+    fig.suptitle(f"{title}\nblack, label in red: not bounded (stopped at that time)", fontsize=8)
+    if image is not None:
+        fig.colorbar(image, ax=grid, label=metric, shrink=0.8)
+    save_figure(fig, path, dpi=80)
+    plt.close(fig)

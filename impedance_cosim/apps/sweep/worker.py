@@ -1,0 +1,99 @@
+"""One run of a sweep, in the process that runs it (a dask worker, or this process for serial
+runs): the system archive read once per process (cached by digest), a Master per run, its row.
+
+The functions a dask task calls (run_batch, run_point, prepare_worker) live here: workers import
+them by this module's path. A run that fails or diverges is a row with its status and reason; a
+run stopped by a signal is not a row (RunInterruptedError): the sweep stops.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from impedance_cosim.apps.sweep.metrics import METRICS, run_metrics
+from impedance_cosim.apps.sweep.plan import master_arguments
+from impedance_cosim.cosim.fmu_pool import InstancePool
+from impedance_cosim.cosim.master import Master
+
+POOL = InstancePool()  # per worker process: FMU instances reused across runs (run_batch)
+_SYSTEMS: dict[str, Any] = {}  # per process: SSP digest -> SystemDescription (FMUs extracted once)
+
+
+def _system(payload: bytes | str, digest: str):
+    system = _SYSTEMS.get(digest)
+    if system is None:
+        from impedance_cosim.cosim.ssp import read_ssp
+
+        if isinstance(payload, bytes):
+            with tempfile.TemporaryDirectory(prefix="impcosim_sweep_") as tmp:
+                path = Path(tmp) / "system.ssp"
+                path.write_bytes(payload)
+                system = read_ssp(path)
+        else:
+            system = read_ssp(payload)
+        _SYSTEMS[digest] = system
+    return system
+
+
+def prepare_worker(payload: bytes | str, digest: str) -> str:
+    """Read the archive into this process's cache and take a few steps (loads the FMUs' libraries
+    and the compiled master loop), so a worker's first run costs what its others do."""
+    system = _system(payload, digest)
+    h = system.step_size or 1 / 400
+    Master(system, step_size=h, stop_time=system.start_time + 10 * h).run()
+    return digest
+
+
+class RunInterruptedError(Exception):
+    """A run stopped by SIGINT/SIGTERM: no result; the sweep stops (--resume runs it again)."""
+
+
+STOP: dict[str, str | None] = {
+    "signal": None
+}  # set by the signal handler (command.stop_on_signals)
+
+
+def _interrupted(error: str | None) -> bool:
+    """The master's error for a run it stopped on a signal (see cli/master: "interrupted ...")."""
+    return bool(error) and error.lower().startswith("interrupted")
+
+
+def run_point(
+    payload: bytes | str, digest: str, point: dict, options: dict, instances: Any = None
+) -> dict[str, Any]:
+    """One run of the sweep -> its table row (failures are rows); RunInterruptedError (or a
+    KeyboardInterrupt) when a signal stopped it, whatever the FMUs made of the signal.
+    instances: an fmu_pool.InstancePool to take the FMU instances from (run_batch)."""
+    started = time.perf_counter()
+    row: dict[str, Any] = dict(point)
+    row.update(status="ok", error="")
+    row.update({m: None for m in METRICS})
+    try:
+        system = _system(payload, digest)
+        result = Master(system, **master_arguments(point, options), instances=instances).run()
+        if STOP["signal"] or _interrupted(result.error):
+            raise RunInterruptedError(result.error or f"interrupted ({STOP['signal']})")
+        row["t_end_s"] = float(result.data[-1, 0]) if len(result.data) else None
+        if result.ok:
+            row.update(run_metrics(result))
+        else:
+            row["status"] = "diverged" if result.error.startswith("diverged") else "failed"
+            row["error"] = result.error
+    except RunInterruptedError:
+        raise
+    except Exception as exc:  # a row, never a crashed sweep
+        if STOP["signal"]:  # e.g. a Python FMU turned the KeyboardInterrupt into an FMI error
+            raise RunInterruptedError(f"interrupted ({STOP['signal']})") from None
+        row.update(status="failed", error=" ".join(f"{type(exc).__name__}: {exc}".split()))
+    row["wall_s"] = time.perf_counter() - started
+    return row
+
+
+def run_batch(payload: bytes | str, digest: str, points: Sequence[dict], options: dict) -> list:
+    """The rows of several points, one after another in this process (a dask task of
+    execute.run_dask), with its FMU instances reused from run to run."""
+    return [run_point(payload, digest, p, options, instances=POOL) for p in points]

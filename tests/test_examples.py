@@ -1,0 +1,67 @@
+"""The example notebook runs: examples/paper_scenario.ipynb executed by nbclient in a Jupyter
+kernel of this Python (paper scenario, summary, provenance, Fig. 1, a small sweep)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+from impedance_cosim.cosim.provenance import file_sha256
+
+NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "paper_scenario.ipynb"
+
+
+@pytest.fixture
+def kernel(tmp_path, monkeypatch) -> str:
+    """A kernel spec running ipykernel in this very Python (not whatever `python` a user-wide
+    Jupyter install would start), found first through JUPYTER_PATH."""
+    spec = tmp_path / "jupyter" / "kernels" / "impcosim-test"
+    spec.mkdir(parents=True)
+    argv = [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"]
+    kernel_json = {"argv": argv, "display_name": "impedance-cosim tests", "language": "python"}
+    (spec / "kernel.json").write_text(json.dumps(kernel_json))
+    monkeypatch.setenv("JUPYTER_PATH", str(tmp_path / "jupyter"))
+    return spec.name
+
+
+def test_the_notebook_is_stored_without_outputs():
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    nbformat.validate(nb)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert code and all(c.outputs == [] and c.execution_count is None for c in code)
+
+
+def test_the_notebook_runs(ssp_path, tmp_path, kernel):
+    work = tmp_path / "run"
+    work.mkdir()
+    shutil.copy(NOTEBOOK, work / NOTEBOOK.name)
+    nb = nbformat.read(work / NOTEBOOK.name, as_version=4)
+    (parameters,) = [c for c in nb.cells if "parameters" in c.metadata.get("tags", [])]
+    parameters.source = f"SSP = {str(ssp_path)!r}"  # this checkout's archive, built by conftest
+    client = NotebookClient(nb, timeout=300, kernel_name=kernel,
+                            resources={"metadata": {"path": str(work)}})  # fmt: skip
+    client.execute()  # raises CellExecutionError on the first cell that fails
+
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    # the paper scenario's summary (20 s: both contacts)
+    assert "<Result 'observer': ok, 8001 rows to 20 s>" in text
+    assert "contact with the wall: 3.85-6.21 s, 13.85-16.20 s" in text
+    assert "settled contact force: 19.7" in text
+    # the provenance highlights: the call and the archive's checksum
+    assert f"call:      simulate('observer', ssp={str(ssp_path)!r})" in text
+    assert file_sha256(ssp_path)[:16] in text
+    # the sweep's table: one line per stiffness
+    table = text[text.index("G1 [N/m]") :].splitlines()[1:5]
+    assert [line.split()[0] for line in table] == ["250", "500", "1000", "2000"]
+    assert all(float(line.split()[1]) > 0 for line in table)  # an impact in every run
+    # Fig. 1 and the sweep's plot, as images
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) == 2

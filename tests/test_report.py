@@ -11,6 +11,7 @@ import base64
 import io
 import json
 import os
+import shlex
 import shutil
 import subprocess
 from html.parser import HTMLParser
@@ -246,6 +247,23 @@ def test_sweep_report_shows_maps_table_and_provenance(tmp_path):
     assert page.row("ssp_sha256")[1] == "ab" * 32
     assert page.row("3") == ["3", "0.5", "diverged", "</td><script>alert(1)</script>", ""]
     assert page.tables[-1][0] == ["run", "controller.K", "status", "error", "peak_force"]
+
+
+def test_sweep_writes_its_report(ssp_path, tmp_path):
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--serial", "--ssp", str(ssp_path), "--stop", "0.5", "--out", str(out),
+            "--grid", "controller.velocity_source=observer,7", "--plot", "peak_torque_N_m",
+            "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    page = check_page(out / "report.html")
+    assert page.images() == [(out / "sweep_peak_torque_N_m.png").read_bytes()]
+    assert "2 runs, 1 ok, 1 not." in " ".join(page.text)
+    assert page.row("command")[1] == shlex.join(["impedance-cosim", *argv])
+    assert page.row("ssp_sha256")[1] == file_sha256(ssp_path)
+    table = page.tables[-1]
+    assert [r[table[0].index("status")] for r in table[1:]] == ["ok", "failed"]
+    assert main([*argv, "--out", str(tmp_path / "b"), "--no-report"]) == 0
+    assert not (tmp_path / "b" / "report.html").exists() and (tmp_path / "b" / "sweep.csv").exists()
 
 
 def test_sweep_report_from_a_long_csv_table(tmp_path, monkeypatch):

@@ -39,7 +39,8 @@ text-align:left;vertical-align:top}th{background:#f3f3f3}code,pre{font-size:13px
 pre{white-space:pre-wrap;word-break:break-all;background:#f6f6f6;padding:.5rem}
 .ok{background:#e6f4e6;padding:.6rem;border-left:6px solid #2a2}
 .failed{background:#fbe7e7;padding:.6rem;border-left:6px solid #c22;font-weight:600}
-figure{margin:1rem 0}img{max-width:100%;height:auto;border:1px solid #ddd}"""
+figure{margin:1rem 1rem 1rem 0;display:inline-block;vertical-align:top}
+img{max-width:100%;height:auto;border:1px solid #ddd}"""
 Run = Mapping[str, Any]
 
 
@@ -165,8 +166,9 @@ def _e(value: Any) -> str:
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     head = "".join(f"<th>{_e(h)}</th>" for h in header)
+    head = f"<thead><tr>{head}</tr></thead>" if any(header) else ""
     body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    return f"<table>{head}<tbody>{body}</tbody></table>"
 
 
 def _plain(value: Any) -> str:
@@ -191,15 +193,14 @@ def png_data_uri(path: Path) -> tuple[str, int, int] | None:
 def _figures(paths: Sequence[Path]) -> str:
     parts = []
     for path in paths:
-        caption = CAPTIONS.get(Path(path).name, Path(path).name)
+        name = Path(path).name
+        caption = f"{CAPTIONS[name]} ({name})" if name in CAPTIONS else name
         if (image := png_data_uri(path)) is None:
-            parts.append(f"<p>{_e(Path(path).name)}: missing or not a PNG, not shown.</p>")
-            continue
-        uri, w, h = image
-        parts.append(
-            f'<figure><img src="{uri}" alt="{_e(caption)}" width="{w}" height="{h}">'
-            f"<figcaption>{_e(caption)} ({_e(Path(path).name)})</figcaption></figure>"
-        )
+            parts.append(f"<p>{_e(name)}: missing or not a PNG, not shown.</p>")
+        else:
+            uri, w, h = image
+            parts.append(f'<figure><img src="{uri}" alt="{_e(caption)}" width="{w}" height="{h}">'
+                         f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
     return "".join(parts) or "<p>No figures were made by this command.</p>"
 
 
@@ -274,11 +275,9 @@ def run_report(
     scenario = main.get("scenario") or "no scenario"
     title = f"impedance-cosim {verb}: {scenario}, {'ok' if ok else 'FAILED'}"
     kept = ", ".join(_kept(record, figures, out))
-    if ok:
-        parts = [f'<p class="ok">All runs finished. Files: {_e(kept)}.</p>']
-    else:
-        parts = [f'<p class="failed">This command FAILED: {_e(problems)}. '
-                 f"Kept in the results folder: {_e(kept)}.</p>"]  # fmt: skip
+    banner = f"All runs finished. Files: {kept}." if ok else (
+        f"This command FAILED: {problems}. Kept in the results folder: {kept}.")  # fmt: skip
+    parts = [f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>']
 
     parts.append("<h2>The summary against the paper</h2>")
     if "summary" not in main:

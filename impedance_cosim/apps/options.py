@@ -72,5 +72,7 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
     add_options(p)
     p.add_argument("--out", default=out, help=f"output folder (default {out}/)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--no-report", action="store_true",
+                   help="skip report.html (the results as one self-contained page)")  # fmt: skip
     p.add_argument("--no-progress", action="store_true",
                    help="no progress (a bar on a terminal, else a line every 10 s)")  # fmt: skip

@@ -106,15 +106,22 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                   f" {len(result.data)} rows kept in {path}", file=sys.stderr)  # fmt: skip
         return result
 
+    figures: list[Path] = []  # the figures this command wrote, for report.html
     try:
-        return _scenarios_and_figures(args, system, overrides, out, run, runs)
+        return _scenarios_and_figures(args, system, overrides, out, run, runs, figures)
     finally:
         record = provenance.record(runs, started, time.perf_counter() - t0,
                                    command=args.command_line, ssp=ssp)  # fmt: skip
         provenance.write(out / "run.json", record)
+        if not getattr(args, "no_report", False):
+            from impedance_cosim.apps import report
+
+            if page := report.write_run_report(out, record, figures, sys.exc_info()[1]):
+                print(f"report: {page}")
 
 
-def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: list) -> int:
+def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: list,
+                           figures: list) -> int:  # fmt: skip
     """The main scenario, its summary and figures, and its Fig. 4 pair; 1 when any failed."""
     from impedance_cosim.apps import analysis
     from impedance_cosim.util.atomic import atomic_write
@@ -134,9 +141,9 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
         f.write(json.dumps(values, indent=2) + "\n")
     if args.no_figures:
         return 0
-    _figure(analysis.figure_1, out / "fig1_position_force.png", main)
-    _figure(analysis.figure_2, out / "fig2_observer.png", main)
-    _figure(analysis.figure_3, out / "fig3_velocity_tracking.png", main)
+    figures.append(_figure(analysis.figure_1, out / "fig1_position_force.png", main))
+    figures.append(_figure(analysis.figure_2, out / "fig2_observer.png", main))
+    figures.append(_figure(analysis.figure_3, out / "fig3_velocity_tracking.png", main))
     pair = {"observer": None, "difference": None}
     source = str(overrides.get("controller.velocity_source", "")) or main.parameter_set
     if source in pair:
@@ -148,12 +155,12 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
         return 1
     if all(r is not None for r in pair.values()):
         fig4 = out / "fig4_observer_vs_difference.png"
-        _figure(analysis.figure_4, fig4, pair["observer"], pair["difference"])
+        figures.append(_figure(analysis.figure_4, fig4, pair["observer"], pair["difference"]))
     print(f"figures in {out}/")
     return 0
 
 
-def _figure(draw, path: Path, *runs) -> None:
+def _figure(draw, path: Path, *runs) -> Path:
     """draw(*runs, path) through a temporary file renamed into place (a figure is whole or old)."""
     from impedance_cosim.util import atomic
 
@@ -164,6 +171,7 @@ def _figure(draw, path: Path, *runs) -> None:
         atomic.discard(tmp)
         raise
     atomic.replace(tmp, path)
+    return path
 
 
 def _echo_fmu_output(text: str, stream) -> None:

@@ -106,6 +106,7 @@ def add_parser(sub) -> None:
         help=f"metric to map (repeatable; default {', '.join(DEFAULT_PLOTS)})",
     )
     p.add_argument("--no-plots", action="store_true", help="only the table")
+    p.add_argument("--no-report", action="store_true", help="no report.html (maps and table)")
     p.add_argument(
         "--no-progress",
         action="store_true",
@@ -282,9 +283,13 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         print(f"  {where}: {r['status']}: {r['error']}")
     if len(bad) > 10:
         print(f"  ... and {len(bad) - 10} more (see the table)")
-    if not args.no_plots:
-        for metric in args.plot or DEFAULT_PLOTS:
-            png = out / f"sweep_{metric}.png"
-            plot_map(rows, list(plan.axes), metric, png, mode=plan.mode)
-            print(f"  {png}")
+    maps = [] if args.no_plots else [out / f"sweep_{m}.png" for m in args.plot or DEFAULT_PLOTS]
+    for png in maps:
+        plot_map(rows, list(plan.axes), png.stem.removeprefix("sweep_"), png, mode=plan.mode)
+        print(f"  {png}")
+    if not args.no_report:
+        from impedance_cosim.apps import report
+
+        record = {"command": args.command_line, "table": str(path), **table.plan}
+        print(f"  {report.write_sweep_report(out, rows, maps, record)}")
     return 0

@@ -1,0 +1,399 @@
+"""`report.html`: a results folder as one page to open and share, self-contained (figures inline
+as data: URIs, no style sheet, script, font or anything else fetched): how the result was made
+(run.json), the summary next to what the paper states, the figures and the units of the signals;
+for a sweep, its provenance, its maps and its table."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import json
+import shlex
+import struct
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from impedance_cosim.apps.analysis import TARGET_FORCE
+from impedance_cosim.cosim.system import PAPER_PARAMETERS
+
+REPORT_NAME = "report.html"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+# The browser fetches nothing: images only from data: URIs, the one inline style sheet.
+CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+MAX_TABLE_ROWS = 500  # a sweep's table in the page; the CSV has them all
+CAPTIONS = {
+    "fig1_position_force.png": "Fig. 1: position and force tracking",
+    "fig2_observer.png": "Fig. 2: the velocity observer, eq. (9)",
+    "fig3_velocity_tracking.png": "Fig. 3: velocity tracking",
+    "fig4_observer_vs_difference.png": "Fig. 4: observer vs numerical differentiation in the loop",
+}
+STYLE = """body{font:15px/1.45 system-ui,sans-serif;max-width:72rem;margin:1.5rem auto;
+padding:0 1rem;color:#222}h1{font-size:1.5rem}
+h2{font-size:1.2rem;border-bottom:1px solid #ccc;margin-top:2rem}
+table{border-collapse:collapse;margin:.5rem 0}td,th{border:1px solid #ccc;padding:.2rem .5rem;
+text-align:left;vertical-align:top}th{background:#f3f3f3}code,pre{font-size:13px}
+pre{white-space:pre-wrap;word-break:break-all;background:#f6f6f6;padding:.5rem}
+.ok{background:#e6f4e6;padding:.6rem;border-left:6px solid #2a2}
+.failed{background:#fbe7e7;padding:.6rem;border-left:6px solid #c22;font-weight:600}
+figure{margin:1rem 1rem 1rem 0;display:inline-block;vertical-align:top}
+img{max-width:100%;height:auto;border:1px solid #ddd}"""
+Run = Mapping[str, Any]
+
+
+# --- the paper's numbers ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One thing the paper states about its simulation, where it says so, and what a run shows
+    for it (measured(main run, all runs) -> text, None when the run has nothing to say)."""
+
+    quantity: str
+    paper: str
+    source: str
+    measured: Callable[[Run, Sequence[Run]], str | None]
+
+
+def _param(run: Run, name: str) -> Any:
+    comp, _, var = name.partition(".")
+    return run["parameters"][comp][var]
+
+
+def _as_paper(run: Run, names: Sequence[str], text: str) -> str:
+    """text, and whether the run's values of names are the paper's."""
+    same = all(_param(run, n) == PAPER_PARAMETERS[n] for n in names)
+    return f"{text} ({'as in the paper' if same else 'NOT the paper'})"
+
+
+def _rate(run: Run, _runs: Sequence[Run]) -> str:
+    return f"{1 / run['step_size']:.4g} Hz ({run['algorithm']})"
+
+
+def _gains(run: Run, _runs: Sequence[Run]) -> str:
+    names = [f"controller.{sym}{i}" for sym in "KGB" for i in (1, 2, 3)]
+    values = {sym: [f"{_param(run, f'controller.{sym}{i}'):.4g}" for i in (1, 2, 3)]
+              for sym in "KGB"}  # fmt: skip
+    text = "; ".join(f"{k} = {', '.join(dict.fromkeys(v))}" for k, v in values.items())
+    return _as_paper(run, names, text)
+
+
+def _wall(run: Run, _runs: Sequence[Run]) -> str:
+    names = ["plant.wall_x", "plant.wall_k", "controller.wall_depth"]
+    x, k, depth = (_param(run, n) for n in names)
+    return _as_paper(run, names, f"x = {x} m, {k:g} N/m, {depth} m inside")
+
+
+def _start(run: Run, _runs: Sequence[Run]) -> str:
+    names = ["plant.x0", "plant.y0"]
+    return _as_paper(run, names, f"({_param(run, names[0])} m, {_param(run, names[1])} m)")
+
+
+def _settled(run: Run, _runs: Sequence[Run]) -> str:
+    f = run["summary"]["settled_force_N"]
+    return f"{f:.2f} N settled ({100 * (f - TARGET_FORCE) / TARGET_FORCE:+.1f} %)"
+
+
+def _impact(run: Run, _runs: Sequence[Run]) -> str:
+    s = run["summary"]
+    if "impact_peak_N" not in s:
+        return "no contact with the wall in this run"
+    phases = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in s["contact_phases_s"])
+    return f"peak {s['impact_peak_N']:.1f} N at {s['impact_peak_time_s']:.2f} s; contact {phases}"
+
+
+def _observer(run: Run, _runs: Sequence[Run]) -> str:
+    s = run["summary"]
+    rms = s.get("observer_error_rms_after_2s_m_s")
+    tail = "" if rms is None else f", rms after 2 s {rms:.5f} m/s"
+    return f"max {s['observer_error_max_m_s']:.4f} m/s{tail}"
+
+
+def _tracking(run: Run, _runs: Sequence[Run]) -> str:
+    e = run["summary"]["tracking_error_before_contact_m"]
+    return f"position error before contact (from 2 s): {1e3 * e:.2f} mm max"
+
+
+def _torques(run: Run, _runs: Sequence[Run]) -> str:
+    return "peaks " + ", ".join(f"{v:.1f}" for v in run["summary"]["peak_torque_N_m"]) + " N m"
+
+
+def _difference(_run: Run, runs: Sequence[Run]) -> str | None:
+    diff = [r for r in runs if r.get("parameters", {}).get("controller", {}).get(
+        "velocity_source") in (2, "difference")]  # fmt: skip
+    if not diff:
+        return None
+    return "; ".join(
+        f"{r.get('scenario')} ({r.get('algorithm')}, {r.get('stop_time')} s): "
+        + ("stays bounded" if r.get("status") == "ok" else f"{r.get('status')}: {r.get('error')}")
+        for r in diff
+    )
+
+
+_P = PAPER_PARAMETERS
+# fmt: off
+PAPER: tuple[Claim, ...] = (  # what section 5 and Figs. 1-4 state: the one place in the code
+    Claim("update frequency", f"{1 / _P['controller.sample_period']:.0f} Hz", "section 5", _rate),
+    Claim("gains", "observer K = 50 I; controller G = 1000 I, B = 2 sqrt(1000) I", "section 5",
+          _gains),
+    Claim("wall", f"x = {_P['plant.wall_x']} m, stiffness {_P['plant.wall_k']:g} N/m, virtual "
+          f"trajectory {_P['controller.wall_depth']} m inside", "section 5", _wall),
+    Claim("start pose", f"end effector at ({_P['plant.x0']} m, {_P['plant.y0']} m)",
+          "section 5, Fig. 1a", _start),
+    Claim("contact force", f"{TARGET_FORCE:.1f} N (10^4 N/m x 0.00196 m)", "section 5, Fig. 1d",
+          _settled),
+    Claim("impact", "a tracking overshoot at contact (no value given)", "Fig. 1b, 1d", _impact),
+    Claim("observer error", "tends to zero in x and y", "Fig. 2c, 2d", _observer),
+    Claim("tracking", "follows the desired path; velocity errors from start-up, impact and "
+          "separation", "Fig. 1a, Fig. 3", _tracking),
+    Claim("joint torques", "well within a PUMA-560's capability (no values given)", "Fig. 1c",
+          _torques),
+    Claim("numerical differentiation in the loop", "unstable: the oscillations amplify",
+          "Fig. 4b", _difference),
+)
+# fmt: on
+
+
+# --- HTML pieces ------------------------------------------------------------------------------
+
+
+def _e(value: Any) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    head = "".join(f"<th>{_e(h)}</th>" for h in header)
+    head = f"<thead><tr>{head}</tr></thead>" if any(header) else ""
+    body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table>{head}<tbody>{body}</tbody></table>"
+
+
+def _plain(value: Any) -> str:
+    """A cell value as text: numbers as they are, nested data as compact JSON."""
+    if isinstance(value, (dict, list, tuple)):
+        return json.dumps(value, default=str)
+    return "" if value is None else str(value)
+
+
+def png_data_uri(path: Path) -> tuple[str, int, int] | None:
+    """(data: URI, width, height) of a PNG file; None when it is missing or not a PNG."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        data = b""
+    if not data.startswith(PNG_SIGNATURE) or data[12:16] != b"IHDR" or len(data) < 24:
+        return None
+    width, height = struct.unpack(">II", data[16:24])
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii"), width, height
+
+
+def _figures(paths: Sequence[Path]) -> str:
+    parts = []
+    for path in paths:
+        name = Path(path).name
+        caption = f"{CAPTIONS[name]} ({name})" if name in CAPTIONS else name
+        if (image := png_data_uri(path)) is None:
+            parts.append(f"<p>{_e(name)}: missing or not a PNG, not shown.</p>")
+        else:
+            uri, w, h = image
+            parts.append(f'<figure><img src="{uri}" alt="{_e(caption)}" width="{w}" height="{h}">'
+                         f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
+    return "".join(parts) or "<p>No figures were made by this command.</p>"
+
+
+def _page(title: str, body: str) -> str:
+    return (
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+        f'<meta http-equiv="Content-Security-Policy" content="{CSP}">\n'
+        f"<title>{_e(title)}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
+        f"<h1>{_e(title)}</h1>\n{body}\n</body>\n</html>\n"
+    )
+
+
+def _write(path: Path, text: str, error: BaseException | None) -> Path | None:
+    """Write the page atomically. When it cannot be written: a one-line OSError if the command
+    was otherwise fine, else a line on stderr and None (the command's own error goes on)."""
+    from impedance_cosim.util.atomic import atomic_write
+
+    try:
+        with atomic_write(path, encoding="utf-8") as f:
+            f.write(text)
+    except OSError as exc:
+        message = f"could not write {path}: {exc.strerror or exc}"
+        if error is None:
+            raise OSError(message) from None
+        print(f"impedance-cosim: {message}", file=sys.stderr)
+        return None
+    return path
+
+
+# --- the run report ---------------------------------------------------------------------------
+
+
+def _status(record: Mapping[str, Any], error: BaseException | None) -> tuple[bool, str]:
+    runs = record.get("runs", [])
+    problems = [f"{r.get('scenario')}: {r.get('status')}: {r.get('error')}"
+                for r in runs if r.get("status") != "ok"]  # fmt: skip
+    text = " ".join(str(error).split()) if error is not None else ""
+    if error is not None and not any(text and text in p for p in problems):
+        problems.append(text or type(error).__name__)
+    if not runs and not problems:
+        problems.append("no run was made")
+    return not problems, "; ".join(problems)
+
+
+def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path) -> list[str]:
+    """The files this command left in the results folder."""
+    files = []
+    for r in record.get("runs", []):
+        if r.get("csv"):
+            files.append(f"{r['csv']} ({r.get('rows', '?')} rows, {r.get('scenario')})")
+        name = f"{r.get('scenario')}_summary.json"
+        if "summary" in r and (out / name).is_file():
+            files.append(f"{name} (the summary)")
+    files += [f"{Path(p).name} (figure)" for p in figures]
+    return [*files, "run.json (provenance)", f"{REPORT_NAME} (this page)"]
+
+
+def run_report(
+    record: Mapping[str, Any],
+    figures: Sequence[Path] = (),
+    error: BaseException | None = None,
+    out: Path = Path("."),
+) -> str:
+    """The page of one `impedance-cosim run` (or swap): record is its run.json, figures the PNG
+    files it wrote, error the exception it is ending with (if any)."""
+    runs = list(record.get("runs", []))
+    main = next((r for r in runs if "summary" in r), runs[0] if runs else {})
+    ok, problems = _status(record, error)
+    command = record.get("command") or []
+    verb = command[1] if len(command) > 1 else "run"
+    scenario = main.get("scenario") or "no scenario"
+    title = f"impedance-cosim {verb}: {scenario}, {'ok' if ok else 'FAILED'}"
+    kept = ", ".join(_kept(record, figures, out))
+    banner = f"All runs finished. Files: {kept}." if ok else (
+        f"This command FAILED: {problems}. Kept in the results folder: {kept}.")  # fmt: skip
+    parts = [f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>']
+
+    parts.append("<h2>The summary against the paper</h2>")
+    if "summary" not in main:
+        parts.append("<p>No summary: the main run did not finish.</p>")
+    rows = []
+    for c in PAPER:
+        try:
+            measured = c.measured(main, runs)
+        except (KeyError, TypeError, ValueError, ZeroDivisionError):
+            measured = None
+        rows.append((c.quantity, c.paper, c.source, measured or "not in this run"))
+    parts.append(_table(["", "the paper", "where", f"this command ({scenario})"], rows))
+
+    parts.append("<h2>Figures</h2>" + _figures(figures))
+
+    parts.append("<h2>Runs</h2>")
+    parts.append(_table(
+        ["scenario", "status", "rows", "CSV", "algorithm", "step [s]", "stop [s]", "wall time [s]",
+         "real-time factor", "overrides", "error"],
+        [(r.get("scenario"), r.get("status"), r.get("rows", ""), r.get("csv", ""),
+          r.get("algorithm"), r.get("step_size"), r.get("stop_time"), r.get("wall_time_s", ""),
+          r.get("real_time_factor", ""), _plain(r.get("overrides") or ""), r.get("error") or "")
+         for r in runs]))  # fmt: skip
+
+    parts.append(_provenance(record, runs))
+    units: dict[str, str] = {}
+    for r in runs:
+        units.update({k: v for k, v in r.get("units", {}).items() if k not in units})
+    parts.append("<h2>Signals and units</h2><p>The columns of the CSV files that have a unit "
+                 "(from the FMUs' model descriptions, as in run.json).</p>")  # fmt: skip
+    parts.append(_table(["signal", "unit"], sorted(units.items())) if units else "<p>None.</p>")
+    return _page(title, "\n".join(parts))
+
+
+def _provenance(record: Mapping[str, Any], runs: Sequence[Run]) -> str:
+    """Command, system archive, times, host, FMU files with sha256, parameters, versions."""
+    system = record.get("system", {})
+    command = record.get("command")
+    head = [
+        ("command", shlex.join(command) if command else record.get("call", "")),
+        ("system archive", system.get("ssp", "")),
+        ("system archive sha256", system.get("sha256", "")),
+        ("started (UTC)", record.get("started", "")),
+        ("wall time [s]", record.get("wall_time_s", "")),
+        ("host", " ".join(str(v) for v in record.get("host", {}).values())),
+    ]
+    parts = ["<h2>Provenance</h2><p>As recorded in run.json.</p>", _table(["", ""], head)]
+    fmus: dict[tuple, list[str]] = {}
+    for r in runs:
+        for comp, f in r.get("fmus", {}).items():
+            key = (comp, f.get("file"), f.get("in_system_archive"), f.get("sha256"),
+                   f.get("model"), f.get("fmi_version"), f.get("generation_tool"))  # fmt: skip
+            fmus.setdefault(key, []).append(str(r.get("scenario")))
+    parts.append("<h3>FMU files</h3>" + _table(
+        ["component", "file", "in the system archive", "sha256", "model", "FMI", "generated by",
+         "runs"], [(*k, ", ".join(v)) for k, v in fmus.items()]))  # fmt: skip
+    for r in runs:
+        values = [(f"{c}.{k}", _plain(v)) for c, p in r.get("parameters", {}).items()
+                  for k, v in p.items()]  # fmt: skip
+        parts.append(f"<details><summary>Parameters in effect: {_e(r.get('scenario'))}</summary>"
+                     f"{_table(['parameter', 'value'], values)}</details>")  # fmt: skip
+    versions = [(k, v or "not installed") for k, v in record.get("versions", {}).items()]
+    parts.append("<h3>Versions</h3>" + _table(["package", "version"], versions))
+    return "\n".join(parts)
+
+
+def write_run_report(
+    out: Path,
+    record: Mapping[str, Any],
+    figures: Sequence[Path] = (),
+    error: BaseException | None = None,
+) -> Path | None:
+    """`report.html` in the results folder out (see run_report), written atomically."""
+    return _write(Path(out) / REPORT_NAME, run_report(record, figures, error, Path(out)), error)
+
+
+# --- the sweep report -------------------------------------------------------------------------
+
+
+def sweep_report(
+    rows: Sequence[Mapping[str, Any]] | Path,
+    maps: Sequence[Path],
+    provenance: Mapping[str, Any],
+    title: str = "impedance-cosim sweep",
+) -> str:
+    """The page of a sweep: rows of its table (or the CSV path), its map PNGs and provenance
+    (e.g. the plan record: archive sha256, axes, options; and the command)."""
+    source = rows if isinstance(rows, Path) else None
+    if isinstance(rows, Path):
+        with open(rows, newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    bad = sum(1 for r in rows if str(r.get("status", "")) not in ("ok", ""))
+    summary = f"{len(rows)} runs, {len(rows) - bad} ok, {bad} not"
+    parts = [f'<p class="{"failed" if bad else "ok"}">{_e(summary)}.</p>', "<h2>Provenance</h2>"]
+    info = [(k, shlex.join(v) if k == "command" and isinstance(v, list) else _plain(v))
+            for k, v in provenance.items()]  # fmt: skip
+    parts.append(_table(["", ""], info))
+    parts.append("<h2>Maps</h2>" + _figures(maps))
+    columns: list[str] = []
+    for r in rows:
+        columns += [k for k in r if k not in columns]
+    shown = rows[:MAX_TABLE_ROWS]
+    where = f" (all in {source.name})" if source else ""
+    note = f"first {len(shown)} of {len(rows)} rows{where}" if len(shown) < len(rows) else (
+        f"{len(rows)} rows{where}")  # fmt: skip
+    parts.append(f"<h2>Table</h2><p>{_e(note)}.</p>")
+    parts.append(_table(columns, [[_plain(r.get(c)) for c in columns] for r in shown]))
+    return _page(title, "\n".join(parts))
+
+
+def write_sweep_report(
+    out: Path,
+    rows: Sequence[Mapping[str, Any]] | Path,
+    maps: Sequence[Path],
+    provenance: Mapping[str, Any],
+    title: str = "impedance-cosim sweep",
+) -> Path | None:
+    """`report.html` of a sweep in its folder out (see sweep_report), written atomically."""
+    return _write(Path(out) / REPORT_NAME, sweep_report(rows, maps, provenance, title), None)

@@ -203,3 +203,23 @@ def test_unreachable_scheduler_fails_fast(native_ssp, tmp_path, capsys, no_clust
     assert not (tmp_path / "o").exists()
     with pytest.raises(sweep.SweepError, match="cannot reach"):
         sweep.check_scheduler("tcp://127.0.0.1:1", timeout=0.5)
+
+
+def test_each_table_records_how_it_was_made(native_ssp, tmp_path):
+    """<table>.run.json beside the table: the command, versions, times, the table's plan (the
+    archive's sha256 among it) and its rows by status."""
+    import json
+
+    from impedance_cosim.cosim.provenance import file_sha256
+
+    out = tmp_path / "s"
+    args = ["sweep", "--serial", "--no-plots", "--no-report", "--no-progress", "--ssp",
+            str(native_ssp), "--stop", "0.5", "--out", str(out),
+            "--grid", "controller.velocity_source=observer,7"]  # fmt: skip
+    assert main(args) == 0
+    record = json.loads((out / "sweep.run.json").read_text())
+    assert record["command"] == ["impedance-cosim", *args]
+    assert record["table"] == "sweep.csv" and record["rows"] == {"ok": 1, "failed": 1}
+    assert record["plan"] == json.loads((out / "sweep.plan.json").read_text())
+    assert record["plan"]["ssp_sha256"] == file_sha256(native_ssp)
+    assert record["versions"]["dask"] and record["wall_time_s"] > 0

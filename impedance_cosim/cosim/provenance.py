@@ -145,6 +145,22 @@ def record(
     return out
 
 
+def table_record(
+    table: Path,
+    plan: Mapping[str, Any],
+    rows: Mapping[str, int],
+    started: str,
+    wall_time: float,
+    command: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """The record of a sweep table: the same as a run's (command, versions, host, times), with the
+    table's plan (archive sha256, axes, options, points digest) and its rows by status."""
+    out = record([], started, wall_time, command=command)
+    del out["runs"]
+    out.update(table=table.name, plan=dict(plan), rows=dict(rows))
+    return out
+
+
 def write(path: Path, data: Mapping[str, Any]) -> None:
     """Write a record as JSON, whole or not at all (atomic rename)."""
     from impedance_cosim.util.atomic import atomic_write

@@ -32,6 +32,7 @@ from impedance_cosim.apps.sweep.plan import (
 from impedance_cosim.apps.sweep.study import STUDY, run_study
 from impedance_cosim.apps.sweep.table import open_table
 from impedance_cosim.apps.sweep.worker import STOP, RunInterruptedError
+from impedance_cosim.cosim import provenance
 from impedance_cosim.cosim.master import ALGORITHMS
 
 
@@ -200,6 +201,7 @@ def _kept(tables: list) -> str:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     _check_options(args)
     tables: list = []  # the tables opened so far (for the line on an interruption)
+    started, t0 = provenance.now_utc(), time.perf_counter()
     with stop_on_signals():
         try:
             return _sweep(args, tables)
@@ -213,6 +215,24 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             lead = "\n" if sys.stderr.isatty() else ""
             print(f"{lead}impedance-cosim sweep: interrupted by {name}: {news}", file=sys.stderr)
             return 128 + getattr(signal, name, signal.SIGINT)
+        finally:  # each table's provenance, on every exit path
+            for table in tables:
+                _write_provenance(args, table, started, time.perf_counter() - t0)
+
+
+def _write_provenance(args: argparse.Namespace, table, started: str, wall: float) -> None:
+    """<table>.run.json beside the table: how it was made (see cosim.provenance)."""
+    statuses: dict[str, int] = {}
+    for cells in table.cells.values():
+        status = cells[table.names.index("status")]
+        statuses[status] = statuses.get(status, 0) + 1
+    record = provenance.table_record(table.path, table.plan, statuses, started, wall,
+                                     command=getattr(args, "command_line", None))  # fmt: skip
+    try:
+        provenance.write(table.path.with_name(table.path.stem + ".run.json"), record)
+    except OSError as exc:  # the table itself is kept; say what is missing
+        print(f"impedance-cosim sweep: warning: no provenance for {table.path}: {exc}",
+              file=sys.stderr)  # fmt: skip
 
 
 def _sweep(args: argparse.Namespace, tables: list) -> int:

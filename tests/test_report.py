@@ -266,6 +266,25 @@ def test_sweep_writes_its_report(ssp_path, tmp_path):
     assert not (tmp_path / "b" / "report.html").exists() and (tmp_path / "b" / "sweep.csv").exists()
 
 
+def test_the_study_writes_a_page_per_map(native_ssp, tmp_path):
+    """sweep --study: map_<name>.report.html beside each table, with its plots embedded, and the
+    table's provenance (map_<name>.run.json)."""
+    import json
+
+    out = tmp_path / "study"
+    argv = ["sweep", "--study", "delay", "--serial", "--ssp", str(native_ssp), "--stop", "0.2",
+            "--out", str(out), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    page = check_page(out / "map_delay.report.html")
+    assert page.images() == [(out / "map_delay.png").read_bytes()]
+    assert page.row("ssp_sha256")[1] == file_sha256(native_ssp)
+    rows = len((out / "map_delay.csv").read_text().splitlines()) - 1
+    table = page.tables[-1]
+    assert len(table) - 1 == rows > 0
+    record = json.loads((out / "map_delay.run.json").read_text())
+    assert record["table"] == "map_delay.csv" and sum(record["rows"].values()) == rows
+
+
 def test_sweep_report_from_a_long_csv_table(tmp_path, monkeypatch):
     monkeypatch.setattr(report, "MAX_TABLE_ROWS", 5)
     table = tmp_path / "sweep.csv"

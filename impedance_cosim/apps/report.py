@@ -394,6 +394,7 @@ def write_sweep_report(
     maps: Sequence[Path],
     provenance: Mapping[str, Any],
     title: str = "impedance-cosim sweep",
+    name: str = REPORT_NAME,
 ) -> Path | None:
-    """`report.html` of a sweep in its folder out (see sweep_report), written atomically."""
-    return _write(Path(out) / REPORT_NAME, sweep_report(rows, maps, provenance, title), None)
+    """`report.html` (or `name`) of a sweep in its folder out (see sweep_report), atomically."""
+    return _write(Path(out) / name, sweep_report(rows, maps, provenance, title), None)

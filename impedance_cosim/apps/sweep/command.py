@@ -220,6 +220,20 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                 _write_provenance(args, table, started, time.perf_counter() - t0)
 
 
+def _study_reports(args: argparse.Namespace, out: Path, tables: list, written: list) -> None:
+    """A page per map of the study (map_<name>.report.html): its table, plots and provenance."""
+    from impedance_cosim.apps import report
+
+    for table in tables:
+        stem = table.path.stem
+        maps = [p for p in written if p.suffix == ".png" and p.stem.startswith(stem)]
+        record = {"command": args.command_line, "table": str(table.path), **table.plan}
+        title = f"impedance-cosim sweep --study: {stem}"
+        name = f"{stem}.report.html"
+        page = report.write_sweep_report(out, table.path, maps, record, title, name)
+        print(f"  {page}")
+
+
 def _write_provenance(args: argparse.Namespace, table, started: str, wall: float) -> None:
     """<table>.run.json beside the table: how it was made (see cosim.provenance)."""
     statuses: dict[str, int] = {}
@@ -266,6 +280,8 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
         for path in written:
             print(f"  {path}")
+        if not args.no_report:
+            _study_reports(args, out, tables, written)
         return 0
     if not args.grid:
         raise SweepError("nothing to sweep: give at least one --grid component.variable=values")

@@ -57,6 +57,36 @@ def test_batched_dask_sweep_equals_single_runs(native_dir):
     assert [{k: v for k, v in r.items() if k != "wall_s"} for r in rows] == strip
 
 
+def test_plans_as_one_stream_equal_their_single_runs(native_dir, tmp_path):
+    """The study's maps on a cluster as one stream of batches: each plan's table gets exactly
+    its own rows, equal to its runs in series (and a resumed table's rows are not run again)."""
+    from impedance_cosim.apps.sweep.table import open_table
+
+    ssp = native_dir.parent / "PaperScenario-native.ssp"
+    plans = {
+        "a": sweep.plan_sweep(["controller.K=10,50", "system.rate=200,400"], ssp=ssp, stop=1.0),
+        "b": sweep.plan_sweep(["plant.m3=0.5,2,4"], ssp=ssp, stop=1.0),
+    }
+    with open_table(tmp_path / "a.csv", plans["a"]) as table:  # two of a's runs done before
+        for i in (0, 3):
+            table.add(i, sweep.run_serial(plans["a"], indices=[i])[0])
+    with (
+        open_table(tmp_path / "a.csv", plans["a"], resume=True) as a,
+        open_table(tmp_path / "b.csv", plans["b"]) as b,
+        sweep.dask_client(workers=2) as client,
+    ):
+        assert a.done == {0, 3}
+        calls = []
+        rows = sweep_batch.run_plans(plans, {"a": a, "b": b}, client, lambda n, r: calls.append(r))
+    assert len(calls) == 2 + 3  # only the runs not in the tables
+    for name, plan in plans.items():  # the reference: the same plan in series into a table
+        with open_table(tmp_path / f"serial_{name}.csv", plan) as table:
+            serial = sweep_batch.run_plan(plan, table, None, None)
+        assert len(serial) == len(rows[name]) == len(plan.points)
+        for want, got in zip(serial, rows[name], strict=True):
+            assert {**want, "wall_s": None} == {**got, "wall_s": None}, name
+
+
 def test_batches_follow_the_measured_cost():
     costs = {i: (800.0 if i % 2 else 8000.0) for i in range(100)}  # two run lengths
     batcher = sweep_batch.Batcher(costs, workers=2, target_s=0.3)

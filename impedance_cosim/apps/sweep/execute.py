@@ -206,3 +206,29 @@ def run_plan(plan: Plan, table: Any, client: Any, progress: ProgressHook | None)
         else:
             run_serial(plan, progress, todo, table.add)
     return [dict(r) for r in table.rows()]
+
+
+def run_plans(plans: dict[str, Plan], tables: dict[str, Any], client: Any,
+              progress: ProgressHook | None) -> dict[str, list[dict]]:  # fmt: skip
+    """Several plans (e.g. the study's maps), each into its own table. On a cluster, plans on the
+    same archive with the same options run as one stream of batches: one setup of the workers and
+    no idle tail between plans (rows identical: every run is independent)."""
+    first = next(iter(plans.values()), None)
+    same = first is not None and all(
+        p.ssp == first.ssp and p.options == first.options for p in plans.values()
+    )
+    if client is None or not same:
+        return {name: run_plan(p, tables[name], client, progress) for name, p in plans.items()}
+    where: list[tuple[str, int]] = []  # index in the stream -> (plan, index in that plan)
+    for name, p in plans.items():
+        where += [(name, i) for i in range(len(p.points)) if i not in tables[name].done]
+    if where:
+        points = [plans[name].points[i] for name, i in where]
+        stream = Plan(first.ssp, {}, points, first.options)
+
+        def record(k: int, row: dict) -> None:
+            name, i = where[k]
+            tables[name].add(i, row)
+
+        run_dask(stream, client, progress, None, record)
+    return {name: [dict(r) for r in tables[name].rows()] for name in plans}

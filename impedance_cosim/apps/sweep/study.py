@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.sweep.execute import RunProgress, run_plan
+from impedance_cosim.apps.sweep.execute import RunProgress, run_plans
 from impedance_cosim.apps.sweep.maps import plot_map
 from impedance_cosim.apps.sweep.plan import DEFAULT_SSP, plan_sweep
 from impedance_cosim.apps.sweep.table import open_table
@@ -111,12 +111,10 @@ def run_study(
         if tables is not None:
             tables.extend(opened.values())
         total = sum(len(p.points) - len(opened[n].done) for n, p in plans.items())
-        results = {}
         with contextlib.ExitStack() as stack:
             client = stack.enter_context(client_factory()) if client_factory else None
             tick = stack.enter_context(RunProgress(total, progress))
-            for name, plan in plans.items():
-                results[name] = run_plan(plan, opened[name], client, tick)
+            results = run_plans(plans, opened, client, tick)
     written = []
     for name, rows in results.items():
         written.append(out / f"map_{name}.csv")

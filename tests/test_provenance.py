@@ -58,3 +58,16 @@ def test_sha256_of_a_file(tmp_path):
     f = tmp_path / "x.bin"
     f.write_bytes(np.arange(300_000, dtype=np.uint8).tobytes())  # more than one read block
     assert file_sha256(f) == hashlib.sha256(f.read_bytes()).hexdigest()
+
+
+def test_a_record_that_cannot_be_written_is_one_warning(ssp_path, tmp_path, capsys):
+    """run.json cannot be written (a folder is in its place): one warning line; the run's
+    results and its exit status stand."""
+    out = tmp_path / "res"
+    (out / "run.json").mkdir(parents=True)
+    argv = ["run", "--ssp", str(ssp_path), "--stop", "0.2", "--out", str(out), "--no-figures",
+            "--no-progress", "--no-report"]  # fmt: skip
+    assert main(argv) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "warning:" in err[0] and "run.json not written" in err[0], err
+    assert len(read_csv(out / "observer.csv")) == 81

@@ -112,7 +112,11 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     finally:
         record = provenance.record(runs, started, time.perf_counter() - t0,
                                    command=args.command_line, ssp=ssp)  # fmt: skip
-        provenance.write(out / "run.json", record)
+        try:  # never in place of the run's own error (this is a finally)
+            provenance.write(out / "run.json", record)
+        except OSError as exc:
+            print(f"impedance-cosim {args.command}: warning: {out / 'run.json'} not written:"
+                  f" {exc.strerror or exc}", file=sys.stderr)  # fmt: skip
         if not getattr(args, "no_report", False):
             from impedance_cosim.apps import report
 

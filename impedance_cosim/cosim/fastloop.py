@@ -125,7 +125,7 @@ def stepper(
             s.fmu.fatal |= err.status == 4
             call = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")[err.call]
             t = start_time + (first + done) * step_size
-            detail = "; ".join(s.fmu.errors()[-3:]) or "no message logged"
+            detail = s.fmu.error_detail()
             status = STATUS[err.status] if 0 <= err.status < len(STATUS) else err.status
             return done, f"{s.name}: {call} at t={t} returned {status} ({detail})"
         if err.column >= 0:

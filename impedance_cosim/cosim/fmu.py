@@ -106,15 +106,19 @@ class FmuInstance:
         """Messages logged with Error or Fatal status (what went wrong, in the FMU's words)."""
         return [" ".join(m.split()) for s, _, m in self.messages if s in ("Error", "Fatal")]
 
+    def error_detail(self) -> str:
+        """The last error messages, for the one-line FmuError of a failed call."""
+        return "; ".join(self.errors()[-3:]) or "no message logged"
+
     def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
         try:
             return getattr(self.slave, method)(*args, **kwargs)
         except FMICallException as exc:
             self.fatal |= exc.status == 4
-            detail = "; ".join(self.errors()[-3:]) or "no message logged"
+            detail = self.error_detail()
             raise FmuError(f"{self.name}: {exc} ({detail})") from None
         except Exception as exc:  # instantiate() raises a bare Exception
-            detail = "; ".join(self.errors()[-3:]) or "no message logged"
+            detail = self.error_detail()
             raise FmuError(f"{self.name}: {method} failed: {exc} ({detail})") from None
 
     # --- variables ------------------------------------------------------------------------------
@@ -169,7 +173,7 @@ class FmuInstance:
             status = fn(comp, vr_arr, n, val_arr)
             if status > 1:
                 self.fatal |= status == 4
-                detail = "; ".join(self.errors()[-3:]) or "no message logged"
+                detail = self.error_detail()
                 raise FmuError(f"{self.name}: fmi2GetReal failed ({STATUS[status]}: {detail})")
             return list(val_arr)
 
@@ -188,7 +192,7 @@ class FmuInstance:
             status = fn(comp, vr_arr, n, val_arr)
             if status > 1:
                 self.fatal |= status == 4
-                detail = "; ".join(self.errors()[-3:]) or "no message logged"
+                detail = self.error_detail()
                 raise FmuError(f"{self.name}: fmi2SetReal failed ({STATUS[status]}: {detail})")
 
         return write
@@ -210,7 +214,7 @@ class FmuInstance:
         status = self._do_step(self.slave.component, t, h, 1)
         if status > 1:
             self.fatal |= status == 4
-            detail = "; ".join(self.errors()[-3:]) or "no message logged"
+            detail = self.error_detail()
             raise FmuError(f"{self.name}: doStep at t={t} returned {STATUS[status]} ({detail})")
 
     def get_state(self) -> Any:

@@ -86,7 +86,7 @@ class FmuInstance3(FmuInstance):
 
     def _fail(self, what: str, status: int) -> FmuError:
         self.fatal |= status == 4
-        detail = "; ".join(self.errors()[-3:]) or "no message logged"
+        detail = self.error_detail()
         return FmuError(f"{self.name}: {what} ({STATUS[status]}: {detail})")
 
     def _raw_real(self, function: str, names):

@@ -33,6 +33,7 @@ import numpy as np
 
 from impedance_cosim.apps import analysis
 from impedance_cosim.apps.options import DEFAULT_SSP
+from impedance_cosim.apps.run import echo_fmu_output
 from impedance_cosim.cosim import provenance
 from impedance_cosim.cosim.master import Master, MasterError, RunResult
 from impedance_cosim.cosim.ssp import SspError, SystemDescription, read_ssp
@@ -307,9 +308,7 @@ def _run(
             exc.result = Result(exc.result, record)
         raise
     finally:  # what Python FMUs printed, less their error reports (those are in run.error)
-        for line in fmu_output.getvalue().splitlines():
-            if line.strip() and not line.startswith("error: "):
-                print(line, file=stderr)
+        echo_fmu_output(fmu_output.getvalue(), stderr)
     entry = provenance.run_entry(master, run, overrides)
     if run.ok:
         try:

@@ -93,7 +93,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                 runs.append({**entry, "rows": csv.rows, "error": exc.message})
                 raise
             finally:
-                _echo_fmu_output(fmu_output.getvalue(), stderr)
+                echo_fmu_output(fmu_output.getvalue(), stderr)
         runs.append(provenance.run_entry(master, result, overrides, path))
         status = "ok" if result.ok else "FAILED"
         span = result.data[-1, 0] - result.data[0, 0] if len(result.data) else 0.0
@@ -178,7 +178,7 @@ def _figure(draw, path: Path, *runs) -> Path:
     return path
 
 
-def _echo_fmu_output(text: str, stream) -> None:
+def echo_fmu_output(text: str, stream) -> None:
     """What Python FMUs printed to stderr during a run, less their error reports (the host gets
     those through the FMU logger and puts them in its one-line error)."""
     for line in text.splitlines():

@@ -158,26 +158,29 @@ class PlantModel(FmuModel):
         """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1).
         budget[0], when given, counts the evaluations left in this communication step
         (max_rhs_evaluations)."""
-        arm, wall = self.arm, self.wall
+        terms, wall, ee_x = self.arm.terms, self.wall, self._ee_x
+        forward_dynamics, jacobian = terms.forward_dynamics, terms.jacobian
+        tau1, tau2, tau3 = tau
+        counter = budget if budget is not None else [math.inf]
 
         def f(y):
-            if budget is not None:
-                budget[0] -= 1
-            if budget is not None and budget[0] < 0:
+            counter[0] -= 1
+            if counter[0] < 0:
                 raise IntegrationError(
                     f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
                     " one communication step (parameter max_rhs_evaluations): take a smaller step"
                 )
-            q, qd = y[:3], y[3:]
+            q1, q2, q3, qd1, qd2, qd3 = y
             if in_contact:
-                x, xd = self._ee_x(q, qd)
+                x, xd = ee_x((q1, q2, q3), (qd1, qd2, qd3))
                 fx = contact_force_law(wall, x, xd)
-                j = arm.jacobian(q)[0]  # J^T (fx, 0, 0) = fx * first row of J
-                net = (tau[0] - fx * j[0], tau[1] - fx * j[1], tau[2] - fx * j[2])
+                j = jacobian((q1, q2, q3))[0]  # J^T (fx, 0, 0) = fx * first row of J
+                qdd = forward_dynamics(
+                    q1, q2, q3, qd1, qd2, qd3, tau1 - fx * j[0], tau2 - fx * j[1], tau3 - fx * j[2]
+                )
             else:
-                net = tau
-            qdd = arm.forward_dynamics(q, qd, net)
-            return (qd[0], qd[1], qd[2], qdd[0], qdd[1], qdd[2])
+                qdd = forward_dynamics(q1, q2, q3, qd1, qd2, qd3, tau1, tau2, tau3)
+            return (qd1, qd2, qd3, *qdd)
 
         return f
 

@@ -13,13 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_master import modified  # an archive with members edited
 
-from impedance_cosim.cosim.engines import EngineError, run_in_libcosim
+from impedance_cosim.cosim.engines import EngineError, nanosecond_times, run_in_libcosim
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.fmi.model import ModelError
-from impedance_cosim.fmi.slave import ModelSlave
-from plant_model.model import PlantModel
 
 pytest.importorskip("libcosimpy")
 
@@ -35,27 +33,19 @@ SIGNALS = [
 ]
 
 
-def master_run(ssp_path, parameter_set: str, stop: float, algorithm: str = "jacobi"):
+def master_run(
+    ssp_path, parameter_set: str, stop: float, algorithm: str = "jacobi", libcosim_grid=False
+):
+    """Our master; libcosim_grid: every step on libcosim's time grid (t and h from integer ns)."""
     result = Master(
-        read_ssp(ssp_path), parameter_set=parameter_set, algorithm=algorithm, stop_time=stop
+        read_ssp(ssp_path),
+        parameter_set=parameter_set,
+        algorithm=algorithm,
+        stop_time=stop,
+        step_times=nanosecond_times(0.0, H) if libcosim_grid else None,
     ).run()
     assert result.ok, result.error
     return result
-
-
-@pytest.fixture
-def libcosim_time_grid(monkeypatch):
-    """Every doStep of our Python FMUs moved onto libcosim's time grid (t and h from integer ns),
-    at the FMUs' side so that it holds whatever loop the master uses (idempotent for libcosim's
-    own calls)."""
-    do_step = ModelSlave.do_step
-
-    def on_grid(self, current_time: float, step_size: float) -> bool:
-        i = round(current_time / H)
-        t_i = i * H_NS / 1e9
-        return do_step(self, t_i, (i + 1) * H_NS / 1e9 - t_i)
-
-    monkeypatch.setattr(ModelSlave, "do_step", on_grid)
 
 
 @pytest.fixture(scope="module")
@@ -78,10 +68,8 @@ def test_libcosim_matches_our_jacobi_master_to_1e_9(ssp_path, libcosim_run):
         assert np.allclose(values, ours[name], rtol=0, atol=1e-9), name
 
 
-def test_libcosim_is_bit_identical_to_our_jacobi_master_on_its_time_grid(
-    ssp_path, libcosim_run, libcosim_time_grid
-):
-    ours = master_run(ssp_path, "observer", STOP)
+def test_libcosim_is_bit_identical_to_our_jacobi_master_on_its_time_grid(ssp_path, libcosim_run):
+    ours = master_run(ssp_path, "observer", STOP, libcosim_grid=True)
     for name, values in libcosim_run.items():
         if name != "time":
             assert np.array_equal(values, ours[name]), name
@@ -95,12 +83,12 @@ def test_libcosim_is_not_gauss_seidel(ssp_path, libcosim_run):
     assert np.max(np.abs(libcosim_run["plant.contact_force"] - ours["plant.contact_force"])) > 1.0
 
 
-def test_libcosim_runs_the_chosen_parameter_set(ssp_path, libcosim_time_grid):
+def test_libcosim_runs_the_chosen_parameter_set(ssp_path):
     """libcosim ignores system-level ParameterBindings; run_in_libcosim applies the set itself.
     (The difference scenario goes unstable under Jacobi after ~0.45 s, so the run is short.)"""
     stop = 0.25
     theirs = run_in_libcosim(ssp_path, "difference", stop, H)
-    ours = master_run(ssp_path, "difference", stop)
+    ours = master_run(ssp_path, "difference", stop, libcosim_grid=True)
     for name, values in theirs.items():
         if name != "time":
             assert np.array_equal(values, ours[name]), name
@@ -108,21 +96,28 @@ def test_libcosim_runs_the_chosen_parameter_set(ssp_path, libcosim_time_grid):
     assert not np.array_equal(theirs["controller.qd_hat1"], observer["controller.qd_hat1"])
 
 
-def test_libcosim_reports_a_failing_step_as_an_error(ssp_path, monkeypatch):
+def test_libcosim_reports_a_failing_step_as_an_error(ssp_path, tmp_path):
     """A step the plant refuses (fmi2Discard) stops libcosim with an EngineError naming the plant,
-    and the process lives on. The failure is injected into PlantModel: a pythonfmu FMU runs in this
-    process and imports its model from the same module cache. (A failure during initialization
-    instead aborts the whole process: not tested here.)"""
-    do_step = PlantModel.do_step
+    and the process lives on. The refusal: a plant whose work bound (max_rhs_evaluations = 25)
+    the first contact exceeds (a Python FMU runs its own bundled code, so nothing of it can be
+    patched from here). (A failure during initialization instead aborts the whole process: not
+    tested here.)"""
+    bounded = modified(ssp_path, tmp_path, {"resources/observer_plant.ssv": work_bound(25)})
+    with pytest.raises(EngineError, match=r"t=[0-9.]+ s.*plant"):
+        run_in_libcosim(bounded, "observer", 5.0, H)
 
-    def failing(self, t: float, h: float, inputs: tuple) -> None:
-        if t >= 0.1:
-            raise ModelError("injected failure")
-        do_step(self, t, h, inputs)
 
-    monkeypatch.setattr(PlantModel, "do_step", failing)
-    with pytest.raises(EngineError, match=r"t=0\.1 s.*plant"):
-        run_in_libcosim(ssp_path, "observer", 1.0, H)
+def work_bound(evaluations: int):
+    """An edit of a plant .ssv: one more parameter, max_rhs_evaluations."""
+
+    def edit(data: bytes) -> bytes:
+        extra = (
+            '<ssv:Parameter name="max_rhs_evaluations">'
+            f'<ssv:Integer value="{evaluations}" /></ssv:Parameter>'
+        )
+        return data.replace(b"</ssv:Parameters>", extra.encode() + b"</ssv:Parameters>", 1)
+
+    return edit
 
 
 def test_bad_arguments_are_refused(ssp_path):

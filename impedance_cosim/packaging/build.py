@@ -16,6 +16,7 @@ from pathlib import Path
 import impedance_cosim
 from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.packaging import toolchains
+from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.util.atomic import temp_path
 
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
@@ -100,10 +101,14 @@ def build_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT) -> Path:
         slaves = {s.script for s in FMUS.values()}
         for package in spec.uses:
             _stage(REPO / package, stage / package, skip=slaves)
+        script = package_dir / spec.script
+        tag = content_tag(stage, script.read_text())
+        slave = isolate(stage, script, tag)  # module names of this build's own (isolate.py)
+        packages = [core.name, spec.package, *spec.uses]
         raw = FmuBuilder.build_FMU(
-            package_dir / spec.script,
+            slave,
             dest=Path(tmp) / "raw",
-            project_files=[core, stage / spec.package, *(stage / p for p in spec.uses)],
+            project_files=[stage / f"{p}_{tag}" for p in packages],
             needsExecutionTool="false",
         )
         target = out_dir / f"{spec.model_name}.fmu"

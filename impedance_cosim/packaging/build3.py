@@ -34,6 +34,7 @@ from impedance_cosim.packaging.build import (
     build_ssp,
     pack_native_fmu,
 )
+from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.util.atomic import temp_path
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
@@ -111,8 +112,8 @@ class {name}3(ModelSlave3, Fmi3Slave):
 
 def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "python") -> Path:
     """The Python FMU of a model as FMI 3.0 (pythonfmu3): the same model package and glue mixin
-    as the FMI 2.0 one, a generated slave script (module <name>3, so it never shares a module
-    name with the FMI 2.0 slave), and the modelDescription.xml replaced by ours."""
+    as the FMI 2.0 one, a generated slave script (module <name>3_<tag>, module names of its own
+    like every bundled package: isolate.py), and the modelDescription.xml replaced by ours."""
     from pythonfmu3 import FmuBuilder  # build-time dependency only
 
     cls = spec.load_model_class()
@@ -124,8 +125,10 @@ def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "pyt
         _stage_python(spec, stage)
         script = Path(tmp) / f"{cls.MODEL_NAME}3.py"
         script.write_text(SCRIPT3.format(name=cls.MODEL_NAME, cls=cls_name, module=module))
-        project = [stage / "impedance_cosim", stage / spec.package]
-        raw = FmuBuilder.build_FMU(script, dest=Path(tmp) / "raw", project_files=project)
+        tag = content_tag(stage, script.read_text())
+        slave = isolate(stage, script, tag)  # module names of this build's own (isolate.py)
+        project = [stage / f"impedance_cosim_{tag}", stage / f"{spec.package}_{tag}"]
+        raw = FmuBuilder.build_FMU(slave, dest=Path(tmp) / "raw", project_files=project)
         with zipfile.ZipFile(raw) as zin:
             members = sorted(n for n in zin.namelist() if n != "modelDescription.xml")
             contents = {n: zin.read(n) for n in members}

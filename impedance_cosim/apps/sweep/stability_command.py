@@ -145,9 +145,12 @@ def _run_parts(args: argparse.Namespace, ssp: Path, out: Path, record: Record) -
                        figures=[], kept_runs=len(log.kept), runs=0)  # fmt: skip
             try:
                 rows = _part(part, args, ssp, out, log, simulated)
+            except (KeyboardInterrupt, RunInterruptedError) as exc:
+                record.set(part, status="interrupted", runs=log.runs,
+                           error=f"interrupted by {_signal_name(exc)}")  # fmt: skip
+                raise
             except BaseException as exc:
-                stopped = isinstance(exc, KeyboardInterrupt | RunInterruptedError)
-                record.set(part, status="interrupted" if stopped else "failed", runs=log.runs,
+                record.set(part, status="failed", runs=log.runs,
                            error=" ".join(str(exc).split()) or type(exc).__name__)  # fmt: skip
                 raise
             if part == "boundaries":
@@ -190,6 +193,12 @@ def _part(part: str, args: argparse.Namespace, ssp: Path, out: Path, log: PartLo
     return rows
 
 
+def _signal_name(exc: BaseException) -> str:
+    """The signal that stopped the command: the handler's (STOP), or the master's own."""
+    signum = getattr(exc, "signum", None)
+    return STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
+
+
 def _cmd_stability(args: argparse.Namespace) -> int:
     from impedance_cosim.util.atomic import FolderLock
 
@@ -203,8 +212,7 @@ def _cmd_stability(args: argparse.Namespace) -> int:
             _run_parts(args, ssp, out, record)
             return 0
         except (KeyboardInterrupt, RunInterruptedError) as exc:
-            signum = getattr(exc, "signum", None)  # the master's own interruption carries it
-            name = STOP["signal"] or (signal.Signals(signum).name if signum else "SIGINT")
+            name = _signal_name(exc)
             outcome = KeyboardInterrupt(f"interrupted by {name}")
             lead = "\n" if sys.stderr.isatty() else ""
             print(f"{lead}impedance-cosim stability: interrupted by {name}: "

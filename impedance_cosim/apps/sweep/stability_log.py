@@ -44,7 +44,7 @@ class PartLog:
         self.path = Path(out) / f"{part}.runs.jsonl"
         self.part, self.plan, self.resume, self.valid = part, plan, resume, valid
         self.kept: dict[Key, dict] = {}  # found on --resume
-        self.new = 0  # runs added by this command
+        self.added: dict[Key, dict] = {}  # finished by this command
         self._file: Any = None
 
     def __enter__(self) -> PartLog:
@@ -69,11 +69,11 @@ class PartLog:
     @property
     def runs(self) -> int:
         """Finished runs on disk: kept from before and added now."""
-        return len(self.kept) + self.new
+        return len(self.kept) + len(self.added)
 
     def get(self, key: Key) -> dict | None:
-        """The data of a kept run, None when it is to be run."""
-        return self.kept.get(key)
+        """The data of a finished run (kept or added), None when it is to be run."""
+        return self.kept.get(key) or self.added.get(key)
 
     def add(self, key: Key, data: dict[str, Any]) -> None:
         """A finished run: one line, flushed to disk before the next run starts."""
@@ -83,7 +83,7 @@ class PartLog:
             os.fsync(self._file.fileno())
         except OSError as exc:  # e.g. a full disk: stop with one line
             raise StabilityError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        self.new += 1
+        self.added[key] = data
 
     def remove(self) -> None:
         """The part's table is written: the log is no longer needed."""

@@ -85,7 +85,8 @@ def boundaries_figure(rows: list[dict], path: Path) -> None:
             ax.set_xticks(range(len(sensors)), sensors, rotation=30, fontsize=8)
         else:
             ax.set_xticks(range(3), st.SOURCES, fontsize=8)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:  # a panel of a selection may have no curve
+            ax.legend(fontsize=7)
     axes[0].set_ylabel("critical sample rate (Hz): stable above")
     axes[1].set_ylabel("critical observer gain K (1/s) at 400 Hz: stable below")
     axes[1].set_yscale("log")

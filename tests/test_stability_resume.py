@@ -185,3 +185,35 @@ def test_linear_fails_part_way_then_resumes(native_ssp, tmp_path, monkeypatch, c
                 if (r["velocity"], r["timing"]) == ("measured", "gauss-seidel"))  # fmt: skip
     assert row["simulated_Hz"] == want["simulated_Hz"]
     assert row["predicted_Hz"] == pytest.approx(want["predicted_Hz"], rel=1e-6)
+
+
+def test_a_log_from_outside_is_checked_line_by_line(tmp_path):
+    """Only well-formed runs of the same plan are kept; a torn or malformed line is run again;
+    a log of another plan, or not a log, is refused with one line."""
+    from impedance_cosim.apps.sweep.stability_log import FORMAT, PartLog
+
+    plan = {"ssp_sha256": "ab" * 32, "stop": 20.0}
+    good = ["run", "rate", "observer", "jacobi", "ideal", "euler", 243.0]
+    lines = [
+        json.dumps({"format": FORMAT, "part": "boundaries", "plan": plan}),
+        json.dumps({"key": good, "data": {"status": "ok", "error": ""}}),
+        json.dumps({"key": [*good[:-1], 250.0], "data": {"status": 1, "error": ""}}),
+        json.dumps({"key": [*good[:-1], [1]], "data": {"status": "ok", "error": ""}}),
+        json.dumps({"key": ["gain", "euler", 50.0, "ideal"], "data": {"status": "ok", "K": [1]}}),
+        "[1, 2]",
+        json.dumps({"key": [*good[:-1], 244.0], "data": {"status": "ok", "error": ""}})[:40],
+    ]
+    path = tmp_path / "boundaries.runs.jsonl"
+    path.write_text("\n".join(lines))
+    with PartLog(tmp_path, "boundaries", plan, True, stability_parts.valid_record) as log:
+        assert log.kept == {tuple(good): {"status": "ok", "error": ""}}
+        log.add(tuple([*good[:-1], 242.0]), {"status": "diverged", "error": "x"})
+    assert records(path)[-1]["key"][-1] == 242.0 and len(records(path)) == 2  # rewritten
+    other = {**plan, "stop": 10.0}
+    with pytest.raises(stability.StabilityError, match="another study: its stop is 20.0"):
+        PartLog(tmp_path, "boundaries", other, True, stability_parts.valid_record).__enter__()
+    with pytest.raises(stability.StabilityError, match="holds 2 finished runs"):
+        PartLog(tmp_path, "boundaries", plan, False, stability_parts.valid_record).__enter__()
+    path.write_text("garbage\n" + lines[1])
+    with pytest.raises(stability.StabilityError, match="not a stability log"):
+        PartLog(tmp_path, "boundaries", plan, True, stability_parts.valid_record).__enter__()

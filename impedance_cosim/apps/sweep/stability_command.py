@@ -14,6 +14,7 @@ finishes (stability_log); Ctrl-C/SIGTERM stops with one line saying what was kep
 from __future__ import annotations
 
 import argparse
+import csv
 import math
 import signal
 import sys
@@ -135,10 +136,11 @@ def _run_parts(args: argparse.Namespace, ssp: Path, out: Path, record: Record) -
         table = out / TABLES[part]
         log_path = out / f"{part}.runs.jsonl"
         if args.resume and not log_path.exists() and record.finished(part, plan):
+            rows = _kept_table(part, table)
             record.keep(part)
             print(f"kept {table} (finished earlier)")
             if part == "boundaries":
-                simulated = read_csv(table)
+                simulated = rows
             continue
         with PartLog(out, part, plan, args.resume, valid_record) as log:
             record.set(part, status="running", plan=plan, table=table.name, log=log_path.name,
@@ -162,6 +164,21 @@ def _run_parts(args: argparse.Namespace, ssp: Path, out: Path, record: Record) -
                        figures=[] if args.no_figures or args.condition else figures)  # fmt: skip
             record.write()
             log.remove()
+
+
+def _kept_table(part: str, table: Path) -> list[dict]:
+    """The rows of a part's table finished earlier (--resume), checked to be that part's."""
+    columns = {"boundaries": st.COLUMNS, "linear": LINEAR_COLUMNS, "fig4": FIG4_COLUMNS,
+               "gain": GAIN_COLUMNS}[part]  # fmt: skip
+    try:
+        with open(table, newline="") as f:
+            cells = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise st.StabilityError(f"cannot resume: cannot read {table}: {exc}") from None
+    if len(cells) < 2 or cells[0] != columns or any(len(r) != len(columns) for r in cells):
+        raise st.StabilityError(f"cannot resume: {table} is not a table of `stability {part}` "
+                                "(remove it, or run without --resume)")  # fmt: skip
+    return read_csv(table)
 
 
 def _part(part: str, args: argparse.Namespace, ssp: Path, out: Path, log: PartLog,

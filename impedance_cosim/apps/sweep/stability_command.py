@@ -146,7 +146,7 @@ def _run_parts(args: argparse.Namespace, ssp: Path, out: Path, record: Record) -
             record.set(part, status="running", plan=plan, table=table.name, log=log_path.name,
                        figures=[], kept_runs=len(log.kept), runs=0)  # fmt: skip
             try:
-                rows = _part(part, args, ssp, out, log, simulated)
+                rows, figures = _part(part, args, ssp, out, log, simulated)
             except (KeyboardInterrupt, RunInterruptedError) as exc:
                 record.set(part, status="interrupted", runs=log.runs,
                            error=f"interrupted by {_signal_name(exc)}")  # fmt: skip
@@ -159,9 +159,8 @@ def _run_parts(args: argparse.Namespace, ssp: Path, out: Path, record: Record) -
                 simulated = rows
             kept = f", {len(log.kept)} kept from an earlier run" if args.resume else ""
             print(f"wrote {table} ({log.runs} runs{kept})")
-            figures = [n for p, n in FIGURES.items() if p == part and (out / n).is_file()]
             record.set(part, status="finished", rows=len(rows), runs=log.runs, log=None,
-                       figures=[] if args.no_figures or args.condition else figures)  # fmt: skip
+                       figures=figures)  # fmt: skip
             record.write()
             log.remove()
 
@@ -182,8 +181,8 @@ def _kept_table(part: str, table: Path) -> list[dict]:
 
 
 def _part(part: str, args: argparse.Namespace, ssp: Path, out: Path, log: PartLog,
-          simulated: list[dict]) -> list[dict]:  # fmt: skip
-    """Run one part into its log; write its table (and figure)."""
+          simulated: list[dict]) -> tuple[list[dict], list[str]]:  # fmt: skip
+    """Run one part into its log; write its table (and figure): its rows, the figures drawn."""
     from impedance_cosim.apps.sweep import stability_figures as figs
 
     table = out / TABLES[part]
@@ -202,12 +201,13 @@ def _part(part: str, args: argparse.Namespace, ssp: Path, out: Path, log: PartLo
 
         rows, runs = fig4_part(args, ssp, log)
         write_csv(table, FIG4_COLUMNS, rows)
-        if not args.no_figures and not args.condition:
+        if not args.no_figures and not args.condition:  # the figure shows every condition
             fig4.plot(runs, out / FIGURES[part])
     else:
         rows = gain(args, ssp, log)
         write_csv(table, GAIN_COLUMNS, rows)
-    return rows
+    drawn = part in FIGURES and not args.no_figures and not (part == "fig4" and args.condition)
+    return rows, [FIGURES[part]] if drawn else []
 
 
 def _signal_name(exc: BaseException) -> str:

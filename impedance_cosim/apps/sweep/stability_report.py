@@ -32,8 +32,9 @@ def _csv_table(path: Path) -> str:
     if not rows:
         return f"<p>{_e(path.name)} is empty.</p>"
     body = rows[1 : 1 + report.MAX_TABLE_ROWS]
-    note = f"{len(rows) - 1} rows" + (f", the first {len(body)} shown" if len(body) < len(rows) - 1
-                                       else "")  # fmt: skip
+    note = f"{len(rows) - 1} row{'s' * (len(rows) != 2)}"
+    if len(body) < len(rows) - 1:
+        note += f", the first {len(body)} shown"
     return f"<p>{_e(path.name)} ({_e(note)}):</p>" + _table(rows[0], body)
 
 
@@ -43,7 +44,7 @@ def _part(out: Path, name: str, entry: Mapping[str, Any]) -> str:
     if status == "finished":
         kept = entry.get("kept_runs")
         runs = entry.get("runs")
-        said = f"finished: {entry.get('rows')} rows" + (
+        said = f"finished: {entry.get('rows')} row{'s' * (entry.get('rows') != 1)}" + (
             f" from {runs} runs ({kept} kept from an earlier run)" if runs is not None else
             " (earlier: kept by --resume)")  # fmt: skip
     elif status in ("interrupted", "failed"):

@@ -76,14 +76,23 @@ class PartLog:
         return self.kept.get(key) or self.added.get(key)
 
     def add(self, key: Key, data: dict[str, Any]) -> None:
-        """A finished run: one line, flushed to disk before the next run starts."""
-        try:
-            self._file.write(json.dumps({"key": list(key), "data": data}) + "\n")
-            self._file.flush()
-            os.fsync(self._file.fileno())
-        except OSError as exc:  # e.g. a full disk: stop with one line
-            raise StabilityError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        self.added[key] = data
+        """A finished run: one line, flushed to disk before the next run starts. A signal
+        meanwhile is handled once the line is on disk and counted (so what the command says it
+        kept is what the file holds)."""
+        import signal
+
+        from impedance_cosim.util.interrupt import StopSignals
+
+        with StopSignals() as stop:
+            try:
+                self._file.write(json.dumps({"key": list(key), "data": data}) + "\n")
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            except OSError as exc:  # e.g. a full disk: stop with one line
+                raise StabilityError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+            self.added[key] = data
+        if stop.signum is not None:
+            signal.raise_signal(stop.signum)  # now, to the command's own handler
 
     def remove(self) -> None:
         """The part's table is written: the log is no longer needed."""

@@ -15,8 +15,8 @@ import time
 from impedance_cosim.cosim.loop import run_models
 
 GROUPS = {  # (file suffix, function) -> group; everything else is "other"
-    "plant: arm dynamics H, C, g, solve (forward_dynamics)": [
-        ("arm.py", "forward_dynamics"),
+    "arm dynamics H, C, g, solve (forward_dynamics; plant and observer)": [
+        ("arm_terms.py", "forward_dynamics"),
     ],
     "plant: contact (end-effector x, wall force, event)": [
         ("plant_model/model.py", "_ee_x"),
@@ -48,7 +48,10 @@ def main() -> None:
         return (max(found)[0], max(found)[1]) if found else (0.0, 0)
 
     steps = round(args.stop * 400)
-    rhs = sum(v[1] for k, v in stats.items() if k[2] == "forward_dynamics")
+    plant_f = [
+        v[1] for k, v in stats.items() if k[0].endswith("plant_model/model.py") and k[2] == "f"
+    ]
+    rhs = sum(plant_f)
     print(f"{args.stop:g} s scenario, {steps} steps: plain models {plain:.3f} s CPU "
           f"({args.stop / plain:.1f}x real time); under cProfile {total:.2f} s")  # fmt: skip
     print(f"plant right-hand sides: {rhs} ({rhs / steps:.1f} per communication step)")

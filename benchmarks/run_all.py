@@ -207,7 +207,7 @@ def main() -> None:
         cases = {f"native, {len(first.points)} runs": [first]}
         if not args.quick:
             system = read_ssp(native)
-            cases["native, study (all maps)"] = [
+            maps = [
                 sweep.plan_sweep(
                     [f"{k}={','.join(map(str, v))}" for k, v in m.grid.items()],
                     ssp=native,
@@ -216,6 +216,9 @@ def main() -> None:
                 )
                 for m in sweep.STUDY.values()
             ]
+            # `sweep --study` on a cluster runs its maps as one stream (execute.run_plans)
+            points = [point for m in maps for point in m.points]
+            cases["native, study (all maps)"] = [sweep.Plan(native, {}, points, maps[0].options)]
         python_plan = sweep.plan_sweep(grid, ssp=python, stop=stop)
         cases[f"Python, {len(python_plan.points)} runs"] = [python_plan]
         sweep_table(cases, args.workers, not args.no_external)

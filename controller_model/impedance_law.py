@@ -40,14 +40,15 @@ def impedance_terms(
             f"the Jacobian is singular at q = ({q[0]:.6g}, {q[1]:.6g}, {q[2]:.6g}) rad"
             f" (det J = a1 a2 sin q2 = {det:.3g}): the impedance law needs J^-1"
         )
-    j = arm.jacobian(q)
+    terms = arm.terms  # the generated terms, called directly (this runs every sample)
+    j = terms.jacobian(q)
     # Joint-space form of eq. (10), using J^T J^-T = I:
     # J^T (H_x xv_dd + C_x(q, yhat) xv_d) = H qdd_v + C(q, yhat) qd_v, J^T F_x xv_d = F qd_v,
     # J^T g_x = g, with C_x evaluated at the observed velocity (ERRATA).
     qd_v = solve(j, xv_dot)  # (3b)
-    jdot_qd = matvec(arm.jacobian_dot(q, yhat), qd_v)
+    jdot_qd = matvec(terms.jacobian_dot(q, yhat), qd_v)
     qdd_v = solve(j, (xv_ddot[0] - jdot_qd[0], xv_ddot[1] - jdot_qd[1], xv_ddot[2] - jdot_qd[2]))
-    pose = arm.kinematics(q)
+    pose = terms.kinematics(q)
     e = (pose[0] - xv[0], pose[1] - xv[1], wrap_angle(pose[2] - xv[2]))  # e = x - x_v
     xd_hat = matvec(j, yhat)  # observed Cartesian velocity J yhat
     # Cartesian terms that act through J^T: F_au - B (J yhat - xv_d) - G e
@@ -57,10 +58,10 @@ def impedance_terms(
         f_au[2] - B[2] * (xd_hat[2] - xv_dot[2]) - G[2] * e[2],
     )
     jtf = matTvec(j, f_c)
-    hq = matvec(arm.inertia(q), qdd_v)
-    cq = matvec(arm.coriolis(q, yhat), qd_v)
+    hq = matvec(terms.inertia(q), qdd_v)
+    cq = matvec(terms.coriolis(q, yhat), qd_v)
     fq = arm.friction(qd_v)
-    g = arm.gravity(q)
+    g = terms.gravity(q)
     tau = (
         hq[0] + cq[0] + fq[0] + g[0] + jtf[0],
         hq[1] + cq[1] + fq[1] + g[1] + jtf[1],

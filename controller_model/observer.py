@@ -37,9 +37,11 @@ def observer_update(
     # The bracket is evaluated at the previous sample: explicit Euler of the integral in eq. (7)
     # over [t - dt, t]. tau_prev is the torque actually applied (held) over that interval (the
     # clipped one when limits are on), f_prev the wrist force measured at its start.
-    jtf = matTvec(arm.jacobian(q_prev), f_prev)
+    terms = arm.terms  # the generated terms, called directly (this runs every sample)
+    jtf = matTvec(terms.jacobian(q_prev), f_prev)
     net = (tau_prev[0] - jtf[0], tau_prev[1] - jtf[1], tau_prev[2] - jtf[2])
-    acc = arm.forward_dynamics(q_prev, yhat_prev, net)  # H^-1 [tau - C y - F y - g - J^T F], (5)
+    # H^-1 [tau - C y - F y - g - J^T F], eq. (5)
+    acc = terms.forward_dynamics(*q_prev, *yhat_prev, *net)
     if discretization != "euler":
         out = []
         for i in range(3):

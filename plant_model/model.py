@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,6 +21,21 @@ from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of
 from impedance_cosim.physics.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.physics.ode import IntegrationError, euler_step, integrate
 from impedance_cosim.physics.wall import WallParams, contact_event, contact_force_law, wall_force
+
+
+def end_effector_x(p: ArmParams) -> Callable[..., tuple[float, float]]:
+    """ee_x(q1, q2, q3, qd1, qd2, qd3) -> the end effector's x and x-velocity (all the wall
+    needs), bound to the link lengths of p (it runs at every right-hand side and event check)."""
+    a1, a2, a3 = p.a1, p.a2, p.a3
+
+    def ee_x(q1: float, q2: float, q3: float, qd1: float, qd2: float, qd3: float):
+        q12 = q1 + q2
+        q123 = q12 + q3
+        s1, s12, s123 = a1 * math.sin(q1), a2 * math.sin(q12), a3 * math.sin(q123)
+        x = a1 * math.cos(q1) + a2 * math.cos(q12) + a3 * math.cos(q123)
+        return x, -(s1 + s12 + s123) * qd1 - (s12 + s123) * qd2 - s123 * qd3
+
+    return ee_x
 
 
 @dataclass(frozen=True)
@@ -120,6 +136,7 @@ class PlantModel(FmuModel):
     def __init__(self, parameters: dict[str, Any], start_time: float = 0.0, inputs=None) -> None:
         try:
             self.arm = Arm(build_params(ArmParams, parameters))
+            self._ee_x_flat = end_effector_x(self.arm.params)
             self.wall = build_params(WallParams, parameters)
             self.wall.validate()
             self.setup = build_params(PlantSetup, parameters)
@@ -146,46 +163,43 @@ class PlantModel(FmuModel):
 
     def _ee_x(self, q, qd) -> tuple[float, float]:
         """End-effector x and x-velocity (all the wall needs)."""
-        a = self.arm.params
-        q12 = q[0] + q[1]
-        q123 = q12 + q[2]
-        s1, s12, s123 = a.a1 * math.sin(q[0]), a.a2 * math.sin(q12), a.a3 * math.sin(q123)
-        x = a.a1 * math.cos(q[0]) + a.a2 * math.cos(q12) + a.a3 * math.cos(q123)
-        xd = -(s1 + s12 + s123) * qd[0] - (s12 + s123) * qd[1] - s123 * qd[2]
-        return x, xd
+        return self._ee_x_flat(*q, *qd)
 
     def _rhs(self, tau, in_contact: bool, budget: list[int] | None = None):
         """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1).
         budget[0], when given, counts the evaluations left in this communication step
         (max_rhs_evaluations)."""
-        arm, wall = self.arm, self.wall
+        terms, wall, ee_x = self.arm.terms, self.wall, self._ee_x_flat
+        forward_dynamics, jacobian = terms.forward_dynamics, terms.jacobian
+        tau1, tau2, tau3 = tau
+        counter = budget if budget is not None else [math.inf]
 
         def f(y):
-            if budget is not None:
-                budget[0] -= 1
-            if budget is not None and budget[0] < 0:
+            counter[0] -= 1
+            if counter[0] < 0:
                 raise IntegrationError(
                     f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
                     " one communication step (parameter max_rhs_evaluations): take a smaller step"
                 )
-            q, qd = y[:3], y[3:]
+            q1, q2, q3, qd1, qd2, qd3 = y
             if in_contact:
-                x, xd = self._ee_x(q, qd)
+                x, xd = ee_x(q1, q2, q3, qd1, qd2, qd3)
                 fx = contact_force_law(wall, x, xd)
-                j = arm.jacobian(q)[0]  # J^T (fx, 0, 0) = fx * first row of J
-                net = (tau[0] - fx * j[0], tau[1] - fx * j[1], tau[2] - fx * j[2])
+                j = jacobian((q1, q2, q3))[0]  # J^T (fx, 0, 0) = fx * first row of J
+                qdd = forward_dynamics(
+                    q1, q2, q3, qd1, qd2, qd3, tau1 - fx * j[0], tau2 - fx * j[1], tau3 - fx * j[2]
+                )
             else:
-                net = tau
-            qdd = arm.forward_dynamics(q, qd, net)
-            return (qd[0], qd[1], qd[2], qdd[0], qdd[1], qdd[2])
+                qdd = forward_dynamics(q1, q2, q3, qd1, qd2, qd3, tau1, tau2, tau3)
+            return (qd1, qd2, qd3, *qdd)
 
         return f
 
     def _event(self, in_contact: bool):
-        wall = self.wall
+        wall, ee_x = self.wall, self._ee_x_flat
 
         def g(y):
-            x, xd = self._ee_x(y[:3], y[3:])
+            x, xd = ee_x(*y)
             return contact_event(wall, x, xd, in_contact)
 
         return g
@@ -257,7 +271,11 @@ class PlantModel(FmuModel):
         q, qd = self.q, self.qd
         pose = self.arm.kinematics(q)
         j = self.arm.jacobian(q)
-        xdot = tuple(j[r][0] * qd[0] + j[r][1] * qd[1] + j[r][2] * qd[2] for r in range(3))
+        xdot = (
+            j[0][0] * qd[0] + j[0][1] * qd[1] + j[0][2] * qd[2],
+            j[1][0] * qd[0] + j[1][1] * qd[1] + j[1][2] * qd[2],
+            j[2][0] * qd[0] + j[2][1] * qd[1] + j[2][2] * qd[2],
+        )
         fx = wall_force(self.wall, pose[0], xdot[0])
         pen = max(0.0, pose[0] - self.wall.wall_x)
         return (*self.q_meas, fx, 0.0, 0.0, *q, *qd, *pose, *xdot, fx, pen)

@@ -22,3 +22,65 @@ def test_native_configs_are_up_to_date():
     (python -m impedance_cosim.packaging.cgen)."""
     for path, content in cgen.generate().items():
         assert path.read_text() == content, f"{path} is stale"
+
+
+def _bind(source: str):
+    namespace: dict = {}
+    exec(compile(source, "<arm_terms>", "exec"), namespace)
+    return namespace["bind"]
+
+
+def test_optimized_terms_are_bit_identical_to_per_call_evaluation():
+    """The shipped arm_terms.py hoists parameter-only subexpressions into bind() and computes
+    repeated values once (bind_source.hoist, reuse). Every term must equal, bit for bit, the
+    printed expressions evaluated per call (optimize=False), for random states and parameters."""
+    pytest.importorskip("sympy")
+    import dataclasses
+    import random
+
+    from impedance_cosim.physics.arm import ArmParams
+    from impedance_cosim.physics.derivation import derive, python_source
+
+    # (test_arm_terms_are_up_to_date checks the committed arm_terms.py is the optimized source)
+    optimized, plain = python_source(derive()), python_source(derive(), optimize=False)
+    assert optimized != plain  # it does optimize
+    fast_bind, plain_bind = _bind(optimized), _bind(plain)
+    rng = random.Random(7)
+    for trial in range(200):
+        p = ArmParams()
+        if trial:  # other parameter values too, so no constant can hide in the source
+            p = dataclasses.replace(p, **{
+                f.name: getattr(p, f.name) * rng.uniform(0.5, 2.0) for f in dataclasses.fields(p)
+            })  # fmt: skip
+        fast, ref = fast_bind(p), plain_bind(p)
+        q = tuple(rng.uniform(-4.0, 4.0) for _ in range(3))
+        qd = tuple(rng.uniform(-10.0, 10.0) for _ in range(3))
+        tau = tuple(rng.uniform(-100.0, 100.0) for _ in range(3))
+        calls = {
+            "kinematics": (q,), "jacobian": (q,), "jacobian_dot": (q, qd), "inertia": (q,),
+            "coriolis": (q, qd), "gravity": (q,), "potential_energy": (q,),
+            "forward_dynamics": (*q, *qd, *tau),
+        }  # fmt: skip
+        for name, args in calls.items():
+            got, want = getattr(fast, name)(*args), getattr(ref, name)(*args)
+            assert repr(got) == repr(want), f"{name} differs at trial {trial}: {got} != {want}"
+
+
+def test_fused_forward_dynamics_is_the_sum_of_its_parts():
+    """forward_dynamics = linalg3.solve(H, tau - matvec(C, qd) - F qd - g), operation for
+    operation (the order the native arm.h uses): bit for bit on random states."""
+    import random
+
+    from impedance_cosim.physics.arm import Arm
+    from impedance_cosim.physics.linalg3 import matvec, solve
+
+    arm = Arm()
+    t, p = arm.terms, arm.params
+    rng = random.Random(3)
+    for _ in range(2000):
+        q = tuple(rng.uniform(-4.0, 4.0) for _ in range(3))
+        qd = tuple(rng.uniform(-10.0, 10.0) for _ in range(3))
+        tau = tuple(rng.uniform(-100.0, 100.0) for _ in range(3))
+        cqd, grav, f = matvec(t.coriolis(q, qd), qd), t.gravity(q), (p.f1, p.f2, p.f3)
+        rhs = tuple(tau[i] - cqd[i] - f[i] * qd[i] - grav[i] for i in range(3))
+        assert repr(t.forward_dynamics(*q, *qd, *tau)) == repr(solve(t.inertia(q), rhs))

@@ -68,6 +68,10 @@ class ModelSlave:
         self._dirty = True
         self._start_time = 0.0
         self.model: FmuModel | None = None
+        # The stepping phase's fast paths (get_real, set_real): value reference -> output index
+        # of each Real output, and -> name of each Real input.
+        self._real_output_index: dict[int, int] = {}
+        self._real_input_name: dict[int, str] = {}
         for v in self._table:
             var_cls = self._var_types[v.type]
             if v.causality == "output":
@@ -79,16 +83,19 @@ class ModelSlave:
                 self._values[v.name] = v.start
                 getter = self._value_getter(v.name)
                 setter = self._value_setter(v, _CONVERT[v.type])
-            self.register_variable(
-                var_cls(
-                    v.name,
-                    causality=getattr(self._causality, v.causality),
-                    variability=getattr(self._variability, v.fmi_variability),
-                    description=v.description,
-                    getter=getter,
-                    setter=setter,
-                )
+            var = var_cls(
+                v.name,
+                causality=getattr(self._causality, v.causality),
+                variability=getattr(self._variability, v.fmi_variability),
+                description=v.description,
+                getter=getter,
+                setter=setter,
             )
+            self.register_variable(var)
+            if v.type == "Real" and v.causality == "output":
+                self._real_output_index[var.value_reference] = index
+            elif v.type == "Real" and v.causality == "input":
+                self._real_input_name[var.value_reference] = v.name
 
     # --- variable access ----------------------------------------------------------------------
 
@@ -124,6 +131,32 @@ class ModelSlave:
             return self._outputs[index]
 
         return getter
+
+    def get_real(self, vrs: list[int]) -> list[float]:
+        """fmi2GetReal. While stepping, Real outputs come straight from the last step's outputs
+        (what their getters return, without a call per variable: a host reads every output every
+        step); anything else takes pythonfmu's general path."""
+        if self._phase == STEPPING:
+            index, outputs = self._real_output_index, self._outputs
+            try:
+                return [float(outputs[index[vr]]) for vr in vrs]
+            except KeyError:
+                pass
+        return super().get_real(vrs)  # type: ignore[misc]
+
+    def set_real(self, vrs: list[int], values: list[float]) -> None:
+        """fmi2SetReal. While stepping, Real inputs are stored as their setters would store
+        them, without a call per variable; anything else (parameters) takes the general path."""
+        if self._phase == STEPPING:
+            names = self._real_input_name
+            try:
+                pairs = [(names[vr], float(x)) for vr, x in zip(vrs, values)]
+            except KeyError:
+                pairs = None
+            if pairs is not None:
+                self._values.update(pairs)
+                return
+        super().set_real(vrs, values)  # type: ignore[misc]
 
     # --- lifecycle ----------------------------------------------------------------------------
 

@@ -23,7 +23,7 @@ DEFAULT_OUT = REPO / "fmus"
 # The part of impedance_cosim that runs inside the FMUs (standard library only, plus pythonfmu):
 # the physics and the FMI glue, less the symbolic derivation (sympy, build time only).
 FMU_CORE = ("__init__.py", "physics", "fmi")
-NOT_BUNDLED = frozenset({"derivation.py"})
+NOT_BUNDLED = frozenset({"derivation.py", "bind_source.py"})
 
 
 @dataclass(frozen=True)

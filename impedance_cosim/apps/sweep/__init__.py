@@ -12,6 +12,8 @@ The modules, each importing only those above it:
   maps       the figures of a sweep
   study      `sweep --study`: the five stability maps
   stability  bisection of stability boundaries; stability_command: `impedance-cosim stability`
+             (its parts, log of finished runs, figures and report: stability_parts, _log,
+             _figures, _report)
   command    `impedance-cosim sweep`: options, Ctrl-C/SIGTERM
 
 This package exposes the Python API of sweeps (plan_sweep, run_serial, run_dask, dask_client,

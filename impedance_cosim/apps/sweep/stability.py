@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from impedance_cosim.apps.sweep.execute import RunsLostError
 from impedance_cosim.apps.sweep.plan import master_arguments
-from impedance_cosim.apps.sweep.worker import prepare_worker, run_point
+from impedance_cosim.apps.sweep.worker import RunInterruptedError, prepare_worker, run_point
 
 SOURCES = ("observer", "difference", "measured")
 TIMINGS = ("gauss-seidel", "jacobi")  # sample-and-hold; torque one sample late
@@ -172,30 +173,43 @@ def bisect_all(
     submit: Callable[[Case, float], Any],
     wait: Callable[[], tuple[Case, float, dict]],
     progress: Callable[[int, int], None] | None = None,
+    known: Callable[[Case, float], dict | None] | None = None,
+    finished_run: Callable[[Case, float, dict], None] | None = None,
 ) -> list[Bisection]:
     """Drive every case's bisection: submit(case, x) starts a run, wait() returns one finished
-    run (case, x, row); progress(runs finished, bisections finished) after each. Returns the
-    finished bisections in the order of todo."""
+    run (case, x, row); progress(runs finished, bisections finished) after each. known(case, x):
+    the row of a run kept from an interrupted study (None: run it), taken instead of a run;
+    finished_run(case, x, row) as each new run finishes (to keep it). Returns the finished
+    bisections in the order of todo."""
     state = {c: Bisection(c, *QUANTITIES[c.quantity][0]) for c in todo}
     flying: set[tuple[Case, float]] = set()
 
     def feed(b: Bisection) -> None:
-        for x in b.next_points():
-            if (b.case, x) not in flying and b.outcome(x) is None:
-                flying.add((b.case, x))
-                submit(b.case, x)
+        while True:  # the kept runs first, as far as they take the bisection
+            wanted = [x for x in b.next_points()
+                      if (b.case, x) not in flying and b.outcome(x) is None]  # fmt: skip
+            kept = [(x, row) for x in wanted if known and (row := known(b.case, x)) is not None]
+            for x, row in kept:
+                b.record(x, *_stable(row))
+            if not kept:
+                break
+        for x in wanted:
+            flying.add((b.case, x))
+            submit(b.case, x)
 
     for b in state.values():
         feed(b)
-    done = finished = 0
+    done = 0
     while flying:
         case, x, row = wait()
         flying.discard((case, x))
+        if finished_run:
+            finished_run(case, x, row)
         state[case].record(x, *_stable(row))
         done += 1
         feed(state[case])
-        finished += not any(c == case for c, _ in flying)
         if progress:
+            finished = sum(1 for b in state.values() if not b.next_points())
             progress(done, finished)
     return [state[c] for c in todo]
 
@@ -226,13 +240,17 @@ def run_study(
     stop: float = 20.0,
     client=None,
     progress: Callable[[int, int], None] | None = None,
+    known: Callable[[Case, float], dict | None] | None = None,
+    finished_run: Callable[[Case, float, dict], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Every case's bisection, on the dask client's workers (serially in this process when
-    client is None); the table rows in the order of todo; progress as in bisect_all."""
+    client is None); the table rows in the order of todo; progress, known and finished_run as in
+    bisect_all. RunsLostError when dask cancels a run (no verdict on its point)."""
     data = Path(ssp).read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     options = {"stop": stop, "divergence_limit": 1e6}
     check_cases(todo, ssp, options)
+    hooks = {"progress": progress, "known": known, "finished_run": finished_run}
     if client is None:
         queue: list[tuple[Case, float]] = []
 
@@ -243,30 +261,41 @@ def run_study(
             case, x = queue.pop(0)
             return case, x, run_point(data, digest, case.point(x), options)
 
-        return [b.row() for b in bisect_all(todo, submit, wait, progress)]
+        return [b.row() for b in bisect_all(todo, submit, wait, **hooks)]
 
     from distributed import as_completed
 
     payload = client.scatter(data, broadcast=True, hash=False)
     client.run(prepare_worker, data, digest)
-    running: dict[str, tuple[Case, float]] = {}
-    stream = as_completed([])
+    running: dict[str, tuple[Case, float, Any]] = {}  # task key -> case, value, future
+    # results fetched by as_completed itself: this thread never waits inside a dask call, where
+    # Ctrl-C would leave distributed's event loop with an exception of its own on stderr
+    stream = as_completed([], with_results=True, raise_errors=False)
 
     def submit_d(case: Case, x: float) -> None:
         f = client.submit(run_point, payload, digest, case.point(x), options, pure=False)
-        running[f.key] = (case, x)
+        running[f.key] = (case, x, f)
         stream.add(f)
 
     def wait_d() -> tuple[Case, float, dict]:
-        f = next(stream)
-        case, x = running.pop(f.key)
-        try:
-            row = f.result()
-        except Exception as exc:  # the worker died: an unstable point with the reason
-            row = {"status": "failed", "error": f"task failed: {type(exc).__name__}: {exc}"}
-        return case, x, row
+        f, result = next(stream)
+        case, x, _ = running.pop(f.key)
+        if f.status == "finished":
+            return case, x, result
+        if f.status == "error":
+            exc = result[1]
+            if isinstance(exc, RunInterruptedError):
+                raise exc
+            # the worker died: an unstable point with the reason
+            return case, x, {"status": "failed", "error": f"task failed: {type(exc).__name__}: "
+                             + " ".join(str(exc).split())}  # fmt: skip
+        # e.g. the scheduler went away: no verdict on this point
+        raise RunsLostError(f"dask lost the run at {case.quantity} = {x:g} ({f.status})")
 
-    return [b.row() for b in bisect_all(todo, submit_d, wait_d, progress)]
+    try:
+        return [b.row() for b in bisect_all(todo, submit_d, wait_d, **hooks)]
+    finally:  # on an exception (e.g. Ctrl-C): cancel the runs still in flight
+        client.cancel([f for _, _, f in running.values() if not f.done()])
 
 
 COLUMNS = ["quantity", "velocity", "timing", "sensor", "discretization", "critical",

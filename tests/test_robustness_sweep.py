@@ -423,3 +423,37 @@ def test_out_naming_a_file_is_one_line(native_ssp, tmp_path, capsys):
     assert main([*args, str(tmp_path / "f" / "sub")]) == 2  # a folder that cannot be made
     err = capsys.readouterr().err
     assert f"cannot write the table in {tmp_path / 'f'}" in err and err.count("\n") == 1
+
+
+def _worker_view() -> tuple[list[str], str, str]:
+    """(open files, SIGINT handler, SIGTERM handler) as a worker process sees them."""
+    import os
+
+    files = []
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            files.append(os.readlink(f"/proc/self/fd/{fd}"))
+        except OSError:
+            pass
+    return files, str(signal.getsignal(signal.SIGINT)), str(signal.getsignal(signal.SIGTERM))
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc")
+def test_local_workers_hold_no_lock_of_ours_and_leave_signals_to_us(tmp_path):
+    """LocalCluster workers are forked from the sweep's process on Linux (fast start): they must
+    not keep its folder lock (a re-run would be refused while they live) nor its signal
+    handlers (Ctrl-C is the main process's; SIGTERM ends a worker)."""
+    from impedance_cosim.apps.sweep.cluster import dask_client
+    from impedance_cosim.util.atomic import LOCK_NAME, FolderLock
+
+    def handler(*_):
+        raise AssertionError("a worker ran the sweep's handler")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        with FolderLock(tmp_path), dask_client(workers=1) as client:
+            ((files, sigint, sigterm),) = client.run(_worker_view).values()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert not [f for f in files if f.endswith(LOCK_NAME)], files
+    assert sigint == str(signal.SIG_IGN) and sigterm == str(signal.SIG_DFL)

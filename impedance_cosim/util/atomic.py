@@ -77,9 +77,25 @@ def _remove_pending() -> None:
         discard(path)
 
 
+_HELD_LOCKS: set[int] = set()  # descriptors of the FolderLocks held by this process
+
+
+def _close_held_locks_in_child() -> None:
+    """A forked child (e.g. a dask worker) must not keep this process's folders locked."""
+    for fd in list(_HELD_LOCKS):
+        with contextlib.suppress(OSError):
+            os.close(fd)  # the parent's descriptor keeps the lock
+    _HELD_LOCKS.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_held_locks_in_child)
+
+
 class FolderLock:
     """Exclusive use of a folder by this process while the `with` block runs (see module
-    docstring). The lock file stays in the folder (removing it would race with a waiter)."""
+    docstring). The lock file stays in the folder (removing it would race with a waiter); a
+    forked child does not inherit the lock."""
 
     def __init__(self, folder: str | Path, what: str = "folder") -> None:
         self.folder = Path(folder)
@@ -105,9 +121,11 @@ class FolderLock:
         f.write(f"{os.getpid()}\n")
         f.flush()
         self._file = f
+        _HELD_LOCKS.add(f.fileno())
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self._file is not None:
+            _HELD_LOCKS.discard(self._file.fileno())
             self._file.close()  # closing releases the lock
             self._file = None

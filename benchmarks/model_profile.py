@@ -13,6 +13,7 @@ import pstats
 import time
 
 from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.physics import ode
 
 GROUPS = {  # (file suffix, function) -> group; everything else is "other"
     "arm dynamics H, C, g, solve (forward_dynamics; plant and observer)": [
@@ -31,10 +32,30 @@ GROUPS = {  # (file suffix, function) -> group; everything else is "other"
 }
 
 
+def error_norms(stop: float) -> list[float]:
+    """The scaled error norm of every Dormand-Prince step the plant tries in the scenario: how
+    much of its tolerance a step uses (a step of the communication step's length with a norm far
+    below 1 would leave room for a cheaper method; near 1 it does not)."""
+    norms: list[float] = []
+    original = ode.error_norm
+
+    def recording(*args):
+        norms.append(original(*args))
+        return norms[-1]
+
+    ode.error_norm = recording
+    try:
+        run_models(stop_time=stop)
+    finally:
+        ode.error_norm = original
+    return norms
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--stop", type=float, default=20.0)
     args = parser.parse_args()
+    norms = error_norms(args.stop)
     start = time.process_time()
     run_models(stop_time=args.stop)
     plain = time.process_time() - start
@@ -55,6 +76,10 @@ def main() -> None:
     print(f"{args.stop:g} s scenario, {steps} steps: plain models {plain:.3f} s CPU "
           f"({args.stop / plain:.1f}x real time); under cProfile {total:.2f} s")  # fmt: skip
     print(f"plant right-hand sides: {rhs} ({rhs / steps:.1f} per communication step)")
+    accepted = sorted(n for n in norms if n <= 1.0)
+    print(f"integrator steps: {len(norms)} ({len(norms) - len(accepted)} rejected); error norm of "
+          f"the accepted ones (1 = tolerance): median {accepted[len(accepted) // 2]:.3f}, "
+          f"90% {accepted[int(0.9 * len(accepted))]:.3f}")  # fmt: skip
     print(f"{'share of the profiled time (cumulative, groups overlap where nested)':72} {'%':>5}")
     for group, members in GROUPS.items():
         ct = max(cumulative(f, n)[0] for f, n in members)

@@ -136,7 +136,7 @@ def test_master_runs_fmi3_equal_to_fmi2_bit_for_bit(fmi2_and_fmi3_runs, scenario
     fmi2 = fmi2_and_fmi3_runs["native", scenario, algorithm]
     fmi3 = fmi2_and_fmi3_runs["fmi3", scenario, algorithm]
     assert fmi2.ok and fmi3.ok, (fmi2.error, fmi3.error)
-    assert fmi3.info["loop"] == "python"
+    assert fmi3.info["loop"] == fmi2.info["loop"] == "c"
     assert fmi3.names == fmi2.names and fmi3.data.shape == (8001, len(fmi2.names))
     assert np.array_equal(fmi3.data, fmi2.data)
     assert np.abs(fmi3["plant.contact_force"]).max() > 1.0  # the run did touch the wall
@@ -152,9 +152,39 @@ def test_run_cli_selects_the_fmi3_archive(fmu_dir, tmp_path):
     assert list(out.rglob("*.csv"))
 
 
-def test_c_loop_is_refused_for_fmi3(fmu_dir, fmi3_dir):
-    run = Master(read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"), stop_time=0.1, loop="c").run()
-    assert not run.ok and "C loop runs FMI 2.0 FMUs only" in run.error
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_c_loop_steps_fmi3_as_the_python_loop_bit_for_bit(fmu_dir, fmi3_dir, algorithm):
+    """The compiled loop calls fmi3SetFloat64/fmi3DoStep/fmi3GetFloat64 (native FMI 3.0 FMUs,
+    and the Python ones over 2 s): the same rows as the Python loop; a refused step is reported
+    the same way, naming fmi3DoStep."""
+    system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
+    python = fmi3_dir / "python"
+    cases = [
+        ({}, {}, None),
+        ({"plant": python / PLANT, "controller": python / CONTROLLER}, {}, 2.0),
+        ({}, {"plant.max_rhs_evaluations": 25}, None),  # refused at the first contact
+    ]
+    for files, overrides, stop in cases:
+        runs = {
+            loop: Master(system, "observer", overrides, algorithm, stop_time=stop,
+                         fmu_files=files, loop=loop).run()
+            for loop in ("c", "python")
+        }  # fmt: skip
+        assert runs["c"].info["loop"] == "c"
+        assert np.array_equal(runs["c"].data, runs["python"].data)
+        assert runs["c"].ok == runs["python"].ok == (not overrides)
+    assert "plant: fmi3DoStep at t=3.8475 returned Discard" in runs["c"].error
+
+
+def test_c_loop_is_refused_for_a_clocked_fmu(fmu_dir, fmi3_dir):
+    """Scheduled Execution (the clocked controller) needs the Python loop: loop="c" says why,
+    the default picks the Python loop."""
+    system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
+    files = {"controller": fmi3_dir / CLOCKED}
+    run = Master(system, stop_time=0.1, loop="c", fmu_files=files).run()
+    assert not run.ok
+    assert "controller is an FMI 3.0 Scheduled Execution FMU (clocks)" in run.error
+    assert Master(system, stop_time=0.1, fmu_files=files).run().info["loop"] == "python"
 
 
 # --- other hosts ---------------------------------------------------------------------------

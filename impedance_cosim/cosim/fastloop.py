@@ -1,5 +1,6 @@
 """The master's stepping loop compiled from native/master/loop.c (with the machine's C compiler,
-once per source version, into a user cache folder) and called through ctypes. Without a C
+once per source version, into a user cache folder) and called through ctypes, for FMI 2.0 and
+FMI 3.0 co-simulation FMUs. Without a C
 compiler the master falls back to its Python loop, which computes the same rows. `stepper` binds
 the master's wired components to it."""
 
@@ -17,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from impedance_cosim.cosim.fmu import STATUS
+from impedance_cosim.cosim.fmu3 import is_fmi3
 
 SOURCE = Path(__file__).resolve().parents[2] / "native" / "master" / "loop.c"
 
@@ -27,6 +29,7 @@ class Comp(ctypes.Structure):
         ("set_real", ctypes.c_void_p),
         ("get_real", ctypes.c_void_p),
         ("do_step", ctypes.c_void_p),
+        ("fmi3", ctypes.c_int),
         ("n_in", ctypes.c_int),
         ("in_vr", ctypes.POINTER(ctypes.c_uint)),
         ("in_col", ctypes.POINTER(ctypes.c_int)),
@@ -79,6 +82,26 @@ def load() -> ctypes.CDLL | None:
     return lib
 
 
+MAX_IO = 256  # inputs per component the compiled loop takes (loop.c)
+# The FMI functions the loop calls, per standard
+FUNCTIONS = {
+    False: ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"),
+    True: ("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep"),
+}
+
+
+def unsupported(ordered: list[Any]) -> str | None:
+    """Why the compiled loop cannot step these components (None: it can): it calls FMI 2.0 and
+    FMI 3.0 co-simulation FMUs, not FMI 3.0 Scheduled Execution (clocks), with at most MAX_IO
+    inputs each."""
+    for s in ordered:
+        if is_fmi3(s.fmu.description) and s.fmu.description.coSimulation is None:
+            return f"{s.name} is an FMI 3.0 Scheduled Execution FMU (clocks)"
+        if len(s.inputs) > MAX_IO:
+            return f"{s.name} has {len(s.inputs)} connected inputs (at most {MAX_IO})"
+    return None
+
+
 def stepper(
     lib: ctypes.CDLL,
     ordered: list[Any],
@@ -106,10 +129,13 @@ def stepper(
         out_vr = (ctypes.c_uint * max(1, len(s.outputs)))(*(s.fmu.vr(n) for n in s.outputs))
         keep += [in_vr, in_col, out_vr]
         functions = s.fmu.slave._functions
+        fmi3 = is_fmi3(s.fmu.description)
+        set_name, get_name, step_name = FUNCTIONS[fmi3]
         c.component = s.fmu.slave.component
-        c.set_real = ctypes.cast(functions["fmi2SetReal"], ctypes.c_void_p).value
-        c.get_real = ctypes.cast(functions["fmi2GetReal"], ctypes.c_void_p).value
-        c.do_step = ctypes.cast(functions["fmi2DoStep"], ctypes.c_void_p).value
+        c.set_real = ctypes.cast(functions[set_name], ctypes.c_void_p).value
+        c.get_real = ctypes.cast(functions[get_name], ctypes.c_void_p).value
+        c.do_step = ctypes.cast(functions[step_name], ctypes.c_void_p).value
+        c.fmi3 = int(fmi3)
         c.n_in, c.in_vr, c.in_col = len(s.inputs), in_vr, in_col
         c.n_out, c.out_vr, c.out_col = len(s.outputs), out_vr, offsets[s.name]
     assert data.flags["C_CONTIGUOUS"] and data.dtype == np.float64
@@ -123,7 +149,8 @@ def stepper(
         if err.comp >= 0:
             s = ordered[err.comp]
             s.fmu.fatal |= err.status == 4
-            call = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")[err.call]
+            set_name, get_name, step_name = FUNCTIONS[is_fmi3(s.fmu.description)]
+            call = (set_name, step_name, get_name)[err.call]
             t = start_time + (first + done) * step_size
             detail = s.fmu.error_detail()
             status = STATUS[err.status] if 0 <= err.status < len(STATUS) else err.status

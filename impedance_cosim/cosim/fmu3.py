@@ -1,7 +1,7 @@
 """An FMI 3.0 co-simulation FMU driven through fmpy's FMU3Slave, with the interface of FmuInstance
 (fmu.py): names instead of value references, every status checked, every log message kept, state
 save/restore. open_fmu picks the class from the FMU's fmiVersion, so the master runs FMI 2.0 and
-FMI 3.0 FMUs alike (the C fast loop speaks FMI 2.0 only: FMI 3.0 runs use the Python loop)."""
+FMI 3.0 FMUs alike (the compiled loop steps both; Scheduled Execution needs the Python loop)."""
 
 from __future__ import annotations
 

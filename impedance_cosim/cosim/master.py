@@ -38,7 +38,7 @@ import numpy as np
 
 from impedance_cosim.cosim import fastloop, realtime
 from impedance_cosim.cosim.fmu import FmuError, FmuInstance
-from impedance_cosim.cosim.fmu3 import is_fmi3, open_fmu
+from impedance_cosim.cosim.fmu3 import open_fmu
 from impedance_cosim.cosim.realtime import RealtimeOptions, realtime_stats
 from impedance_cosim.cosim.results import Feed, RunResult, Sink, size_problem
 from impedance_cosim.cosim.run_setup import (
@@ -187,10 +187,10 @@ class Master:
             rows = 1
             feed(data, rows, timing)
             error = self._check_row(names, data[0], t0)
-            fmi3 = [s.name for s in ordered if is_fmi3(s.fmu.description)]
-            if self.loop == "c" and fmi3:
-                raise MasterError(f"the C loop runs FMI 2.0 FMUs only ({', '.join(fmi3)}: 3.0)")
-            fast = fastloop.load() if self.loop != "python" and not fmi3 else None
+            unsupported = fastloop.unsupported(ordered)
+            if self.loop == "c" and unsupported:
+                raise MasterError(f"the C loop cannot run this system: {unsupported}")
+            fast = fastloop.load() if self.loop != "python" and not unsupported else None
             if self.loop == "c" and fast is None:
                 raise MasterError("the C loop cannot be compiled here (no C compiler?)")
             step = self._python_steps

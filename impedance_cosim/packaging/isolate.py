@@ -21,8 +21,9 @@ from pathlib import Path
 ROOTS = ("impedance_cosim", "plant_model", "controller_model", "bridge_model")
 
 
-class IsolationError(RuntimeError):
-    """Bundled code imports one of our packages in a way the rewrite cannot follow."""
+class IsolationError(ValueError):
+    """Bundled code imports one of our packages in a way the rewrite cannot follow (the build
+    command reports it as one error line, exit status 2)."""
 
 
 def content_tag(stage: Path, script_source: str) -> str:

@@ -81,10 +81,16 @@ _HELD_LOCKS: set[int] = set()  # descriptors of the FolderLocks held by this pro
 
 
 def _close_held_locks_in_child() -> None:
-    """A forked child (e.g. a dask worker) must not keep this process's folders locked."""
-    for fd in list(_HELD_LOCKS):
-        with contextlib.suppress(OSError):
-            os.close(fd)  # the parent's descriptor keeps the lock
+    """A forked child (e.g. a dask worker) must not keep this process's folders locked: its
+    copies of the lock descriptors are pointed at /dev/null (the parent's keep the lock; the
+    numbers stay taken, so the child's copy of a lock's file object never closes another file)."""
+    if not _HELD_LOCKS:
+        return
+    with contextlib.suppress(OSError):
+        null = os.open(os.devnull, os.O_RDWR)
+        for fd in _HELD_LOCKS:
+            os.dup2(null, fd)
+        os.close(null)
     _HELD_LOCKS.clear()
 
 

@@ -1,26 +1,49 @@
 /* The master's stepping loop in C: the same Gauss-Seidel / Jacobi steps as the Python loop in
  * impedance_cosim/cosim/master.py, called through ctypes with the FMUs' own fmi2SetReal/fmi2DoStep/
- * fmi2GetReal function pointers, so a step costs the FMUs' time plus well under a microsecond.
+ * fmi2GetReal function pointers (FMI 3.0 co-simulation: fmi3SetFloat64/fmi3DoStep/
+ * fmi3GetFloat64), so a step costs the FMUs' time plus well under a microsecond.
  *
  * Rows: data is (n_steps + 1) x n_cols, column 0 the time, then every component's outputs in
  * order (component k's outputs at columns out_col .. out_col + n_out - 1). Row `first` must be
  * filled by the caller; the loop fills rows first+1 .. first+n_steps.
  */
 #include <math.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <string.h>
 
 typedef int (*set_real_t)(void *, const unsigned *, size_t, const double *);
 typedef int (*get_real_t)(void *, const unsigned *, size_t, double *);
 typedef int (*do_step_t)(void *, double, double, int);
+/* FMI 3.0: fmi3SetFloat64/fmi3GetFloat64 take the number of values too; fmi3DoStep reports
+ * events, termination, an early return and the time reached (no early return is allowed at
+ * instantiation, so the step always reaches t + h, as in the Python loop). */
+typedef int (*set_float64_t)(void *, const unsigned *, size_t, const double *, size_t);
+typedef int (*get_float64_t)(void *, const unsigned *, size_t, double *, size_t);
+typedef int (*do_step3_t)(void *, double, double, bool, bool *, bool *, bool *, double *);
 
 #define MAX_IO 256
 
+/* One FMU function of either standard (the `fmi3` flag of the component says which). */
+typedef union {
+    set_real_t fmi2;
+    set_float64_t fmi3;
+} SetFn;
+typedef union {
+    get_real_t fmi2;
+    get_float64_t fmi3;
+} GetFn;
+typedef union {
+    do_step_t fmi2;
+    do_step3_t fmi3;
+} StepFn;
+
 typedef struct {
     void *component;
-    set_real_t set_real;
-    get_real_t get_real;
-    do_step_t do_step;
+    SetFn set_real;
+    GetFn get_real;
+    StepFn do_step;
+    int fmi3;
     int n_in;
     const unsigned *in_vr;
     const int *in_col; /* column of the row each input is fed from */
@@ -39,13 +62,36 @@ typedef struct {
 static int feed(const Comp *c, const double *row)
 {
     double in[MAX_IO];
-    if (c->n_in == 0) {
+    const size_t n = (size_t)c->n_in;
+    if (n == 0) {
         return 0;
     }
-    for (int k = 0; k < c->n_in; k++) {
+    for (size_t k = 0; k < n; k++) {
         in[k] = row[c->in_col[k]];
     }
-    return c->set_real(c->component, c->in_vr, (size_t)c->n_in, in);
+    if (c->fmi3) {
+        return c->set_real.fmi3(c->component, c->in_vr, n, in, n);
+    }
+    return c->set_real.fmi2(c->component, c->in_vr, n, in);
+}
+
+static int step(const Comp *c, double t, double h)
+{
+    if (c->fmi3) {
+        bool event = false, terminate = false, early = false;
+        double reached = t + h;
+        return c->do_step.fmi3(c->component, t, h, true, &event, &terminate, &early, &reached);
+    }
+    return c->do_step.fmi2(c->component, t, h, 1);
+}
+
+static int collect(const Comp *c, double *row)
+{
+    const size_t n = (size_t)c->n_out;
+    if (c->fmi3) {
+        return c->get_real.fmi3(c->component, c->out_vr, n, row + c->out_col, n);
+    }
+    return c->get_real.fmi2(c->component, c->out_vr, n, row + c->out_col);
 }
 
 /* Returns the number of rows filled after `first` (n_steps when all went well). */
@@ -68,12 +114,12 @@ long run_loop(const Comp *comps, int n_comps, int jacobi, double t0, double h, l
                 return i - first;
             }
             if (!jacobi) {
-                s = c->do_step(c->component, t, h, 1);
+                s = step(c, t, h);
                 if (s > 1) {
                     err->comp = k, err->status = s, err->call = 1;
                     return i - first;
                 }
-                s = c->get_real(c->component, c->out_vr, (size_t)c->n_out, cur + c->out_col);
+                s = collect(c, cur);
                 if (s > 1) {
                     err->comp = k, err->status = s, err->call = 2;
                     return i - first;
@@ -83,7 +129,7 @@ long run_loop(const Comp *comps, int n_comps, int jacobi, double t0, double h, l
         if (jacobi) {
             for (int k = 0; k < n_comps; k++) {
                 const Comp *c = &comps[k];
-                int s = c->do_step(c->component, t, h, 1);
+                int s = step(c, t, h);
                 if (s > 1) {
                     err->comp = k, err->status = s, err->call = 1;
                     return i - first;
@@ -91,7 +137,7 @@ long run_loop(const Comp *comps, int n_comps, int jacobi, double t0, double h, l
             }
             for (int k = 0; k < n_comps; k++) {
                 const Comp *c = &comps[k];
-                int s = c->get_real(c->component, c->out_vr, (size_t)c->n_out, cur + c->out_col);
+                int s = collect(c, cur);
                 if (s > 1) {
                     err->comp = k, err->status = s, err->call = 2;
                     return i - first;

@@ -275,3 +275,20 @@ def test_report_that_cannot_be_written_is_one_line(contact, tmp_path):
     assert list(tmp_path.iterdir()) == []  # no page, no temporary file left behind
     with pytest.raises(ValueError, match="path must be the file to write"):
         contact.report(None)
+
+
+def test_report_of_a_result_without_a_summary(ssp_path, tmp_path, monkeypatch):
+    """A run that finished but has no summary (e.g. another FMU without one of its signals)."""
+
+    def no_signal(_run):
+        raise KeyError("plant.contact_force")
+
+    monkeypatch.setattr(api.analysis, "summary", no_signal)
+    r = ic.simulate(ssp=ssp_path, stop_time=0.2)
+    assert r.ok and r.summary is None
+    page = check_page(r.report(tmp_path / "r.html"))
+    text = " ".join(page.text)
+    assert "impedance_cosim.simulate: observer, ok" in text
+    assert "No summary: 'plant.contact_force'." in text
+    assert page.images() == [] and "No figures: the run has no summary." in text
+    assert page.row("contact force")[3] == "not in this run"

@@ -181,7 +181,8 @@ def result_report(record: Mapping[str, Any], figures: Sequence[Path] = ()) -> st
     rows = main.get("rows", 0)
     banner = f"The run reached its stop time ({rows} rows)." if ok else (
         f"This run FAILED: {problems}. The Result keeps its {rows} rows.")  # fmt: skip
-    units, none = "The signals that have a unit", "No figures: the run did not finish."
+    units = "The signals that have a unit"
+    none = f"No figures: {'the run has no summary' if ok else 'the run did not finish'}."
     body = _run_sections(record, figures, f"this run ({scenario})", "Result.provenance", units,
                          none)  # fmt: skip
     return _page(title, f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>\n{body}')
@@ -194,14 +195,14 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
     runs = list(record.get("runs", []))
     main = _main(runs)
     parts = ["<h2>The summary against the paper</h2>"]
-    if not main.get("summary"):
-        reason = main.get("summary_error") or "the main run did not finish"
-        parts.append(f"<p>No summary: {_e(reason)}.</p>")
+    if not main.get("summary"):  # the API's summary_error reads "no summary: <why>"
+        reason = main.get("summary_error") or "no summary: the main run did not finish"
+        parts.append(f"<p>{_e(reason[:1].upper() + reason[1:])}.</p>")
     rows = []
     for c in PAPER:
         try:
             measured = c.measured(main, runs)
-        except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        except (AttributeError, KeyError, TypeError, ValueError, ZeroDivisionError):
             measured = None
         rows.append((c.quantity, c.paper, c.source, measured or "not in this run"))
     parts.append(_table(["", "the paper", "where", column], rows))

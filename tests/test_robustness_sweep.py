@@ -136,11 +136,14 @@ def native_reference(native_grid, tmp_path_factory) -> dict[int, dict]:
 
 
 def worker_processes(proc: subprocess.Popen) -> list[psutil.Process]:
-    """The sweep's child processes that are its LocalCluster's workers (living ones)."""
+    """The sweep's child processes that are its LocalCluster's workers (living ones): Python
+    like the sweep, not multiprocessing's resource tracker (nor e.g. the ldconfig that ctypes
+    runs while fmpy is imported)."""
+    parent = psutil.Process(proc.pid)
     found = []
-    for child in psutil.Process(proc.pid).children():
+    for child in parent.children():
         try:
-            if "resource_tracker" not in " ".join(child.cmdline()):
+            if child.exe() == parent.exe() and "resource_tracker" not in " ".join(child.cmdline()):
                 found.append(child)
         except psutil.Error:  # e.g. a child that just ended (a zombie until reaped)
             pass

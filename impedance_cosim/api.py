@@ -132,6 +132,20 @@ class Result:
         """Fig. 3: desired vs actual velocity and the tracking error."""
         return self._figure(analysis.figure_3, path)
 
+    def report(self, path: str | Path) -> Path:
+        """Write this run as one self-contained HTML page, the CLI's report.html for a Result: the
+        summary next to the paper's values, Figs. 1-3 inline, provenance, units; returns the path.
+        OSError (one line naming the path) when it cannot be written."""
+        from impedance_cosim.apps.report import write_result_report
+
+        if not isinstance(path, (str, Path)):
+            raise ValueError(f"path must be the file to write, like 'report.html' (got {path!r})")
+        signals = self.signals if self.summary else None  # figures as the CLI draws them
+        try:
+            return write_result_report(Path(path), self.provenance, signals)
+        except OSError as exc:
+            raise OSError(str(exc)) from None  # one line: the path and the reason
+
     def _figure(self, draw, path: str | Path | None) -> Figure:
         if not len(self.data):
             raise ValueError(f"{self.scenario}: no rows to plot ({self.error})")

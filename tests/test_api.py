@@ -1,9 +1,12 @@
 """The Python API (impedance_cosim.simulate / sweep / Result): the same numbers as the command
-line, overrides, provenance, pandas optional, failed runs keep their rows, clear errors."""
+line, overrides, provenance, pandas optional, failed runs keep their rows, clear errors, and
+Result.report: the CLI's self-contained report.html for a Result (checked as test_report checks
+the CLI's page)."""
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import signal
 import subprocess
@@ -14,6 +17,7 @@ import zipfile
 import numpy as np
 import pytest
 from fmpy.util import read_csv
+from test_report import check_page
 
 import impedance_cosim as ic
 from impedance_cosim import api
@@ -208,3 +212,83 @@ def test_import_stays_light_and_the_api_is_lazy():
         "True True",
         "module 'impedance_cosim' has no attribute 'nope'",
     ]
+
+
+@pytest.fixture(scope="module")
+def contact(ssp_path):
+    """The paper scenario through its first contact (4.5 s: the impact and the settled force)."""
+    return ic.simulate(ssp=ssp_path, stop_time=4.5)
+
+
+def test_report_is_the_cli_page_for_a_result(contact, ssp_path, tmp_path):
+    assert contact.ok
+    path = contact.report(tmp_path / "contact.html")
+    assert path == tmp_path / "contact.html"
+    page = check_page(path)  # HTML5 without a parse error, nothing referenced outside the page
+    text = " ".join(page.text)
+    assert "impedance_cosim.simulate: observer, ok" in text
+    assert "The run reached its stop time (1801 rows)." in text
+    # Figs. 1-3 inline, each a PNG data: URI that decodes at the size the page declares
+    images = page.images()
+    assert len(images) == 3 and len(set(images)) == 3
+    for caption in ("Fig. 1: position", "Fig. 2: the velocity observer", "Fig. 3: velocity"):
+        assert caption in text
+    # the summary against the paper, with this Result's numbers
+    summary = contact.summary
+    assert page.row("contact force")[1] == "19.6 N (10^4 N/m x 0.00196 m)"
+    assert page.row("contact force")[3].startswith(f"{summary['settled_force_N']:.2f} N settled")
+    assert f"peak {summary['impact_peak_N']:.1f} N" in page.row("impact")[3]
+    assert page.row("gains")[3].endswith("(as in the paper)")
+    # every value of the summary, to the last digit
+    values = {k: page.row(k)[1] for k in summary}
+    assert {k: json.loads(v) for k, v in values.items()} == json.loads(json.dumps(summary))
+    # provenance: the call, the archive's and each FMU's sha256, the versions
+    assert page.row("call")[1] == f"simulate('observer', ssp={str(ssp_path)!r}, stop_time=4.5)"
+    assert page.row("system archive sha256")[1] == file_sha256(ssp_path)
+    for fmu in contact.provenance["runs"][0]["fmus"].values():
+        assert fmu["sha256"] in text
+    assert page.row("fmpy")[1] == contact.provenance["versions"]["fmpy"]
+    runs = next(t for t in page.tables if t[0][0] == "scenario")
+    assert [r[:3] for r in runs[1:]] == [["observer", "ok", "1801"]]
+    # the units, as in the Result
+    for name in ("plant.contact_force", "controller.tau1", "plant.x"):
+        assert page.row(name) == [name, contact.units[name]]
+
+
+def test_report_of_a_failed_result_says_so(ssp_path, tmp_path):
+    r = ic.simulate(ssp=ssp_path, stop_time=0.5, overrides={"controller.G": 1e9})
+    page = check_page(r.report(tmp_path / "failed.html"))
+    text = " ".join(page.text)
+    assert "impedance_cosim.simulate: observer, FAILED" in text
+    assert f"This run FAILED: observer: failed: {r.error}" in text
+    assert f"The Result keeps its {len(r.time)} rows." in text
+    assert page.images() == [] and "No figures: the run did not finish." in text
+    assert page.row("gains")[3].startswith("K = 50; G = 1e+09") and "NOT the paper" in text
+
+
+def test_report_that_cannot_be_written_is_one_line(contact, tmp_path):
+    for path in (tmp_path / "no" / "such" / "folder" / "r.html", tmp_path):
+        with pytest.raises(OSError, match="could not write") as excinfo:
+            contact.report(path)
+        assert str(path) in str(excinfo.value) and "\n" not in str(excinfo.value)
+        assert last_frame(excinfo).endswith("api.py")
+    assert list(tmp_path.iterdir()) == []  # no page, no temporary file left behind
+    with pytest.raises(ValueError, match="path must be the file to write"):
+        contact.report(None)
+
+
+def test_report_of_a_result_without_a_summary(ssp_path, tmp_path, monkeypatch):
+    """A run that finished but has no summary (e.g. another FMU without one of its signals)."""
+
+    def no_signal(_run):
+        raise KeyError("plant.contact_force")
+
+    monkeypatch.setattr(api.analysis, "summary", no_signal)
+    r = ic.simulate(ssp=ssp_path, stop_time=0.2)
+    assert r.ok and r.summary is None
+    page = check_page(r.report(tmp_path / "r.html"))
+    text = " ".join(page.text)
+    assert "impedance_cosim.simulate: observer, ok" in text
+    assert "No summary: 'plant.contact_force'." in text
+    assert page.images() == [] and "No figures: the run has no summary." in text
+    assert page.row("contact force")[3] == "not in this run"

@@ -11,6 +11,7 @@ from pathlib import Path
 import nbformat
 import pytest
 from nbclient import NotebookClient
+from test_report import check_page
 
 from impedance_cosim.cosim.provenance import file_sha256
 
@@ -65,3 +66,8 @@ def test_the_notebook_runs(ssp_path, tmp_path, kernel):
     # Fig. 1 and the sweep's plot, as images
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 2
+    # the result as one page (Result.report), beside the notebook
+    assert "report: paper_scenario.html" in text
+    page = check_page(work / "paper_scenario.html")
+    assert len(page.images()) == 3
+    assert "impedance_cosim.simulate: observer, ok" in " ".join(page.text)

@@ -1,7 +1,8 @@
 """`report.html`: a results folder as one page to open and share, self-contained (figures inline
 as data: URIs, no style sheet, script, font or anything else fetched): how the result was made
 (run.json), the summary next to what the paper states, the figures and the units of the signals;
-for a sweep, its provenance, its maps and its table."""
+the same page for a Result of the Python API (Result.report); for a sweep, its provenance, its
+maps and its table."""
 
 from __future__ import annotations
 
@@ -12,13 +13,11 @@ import json
 import shlex
 import struct
 import sys
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.analysis import TARGET_FORCE
-from impedance_cosim.cosim.system import PAPER_PARAMETERS
+from impedance_cosim.apps.paper_claims import PAPER, Run
 
 REPORT_NAME = "report.html"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -41,120 +40,6 @@ pre{white-space:pre-wrap;word-break:break-all;background:#f6f6f6;padding:.5rem}
 .failed{background:#fbe7e7;padding:.6rem;border-left:6px solid #c22;font-weight:600}
 figure{margin:1rem 1rem 1rem 0;display:inline-block;vertical-align:top}
 img{max-width:100%;height:auto;border:1px solid #ddd}"""
-Run = Mapping[str, Any]
-
-
-# --- the paper's numbers ----------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One thing the paper states about its simulation, where it says so, and what a run shows
-    for it (measured(main run, all runs) -> text, None when the run has nothing to say)."""
-
-    quantity: str
-    paper: str
-    source: str
-    measured: Callable[[Run, Sequence[Run]], str | None]
-
-
-def _param(run: Run, name: str) -> Any:
-    comp, _, var = name.partition(".")
-    return run["parameters"][comp][var]
-
-
-def _as_paper(run: Run, names: Sequence[str], text: str) -> str:
-    """text, and whether the run's values of names are the paper's."""
-    same = all(_param(run, n) == PAPER_PARAMETERS[n] for n in names)
-    return f"{text} ({'as in the paper' if same else 'NOT the paper'})"
-
-
-def _rate(run: Run, _runs: Sequence[Run]) -> str:
-    return f"{1 / run['step_size']:.4g} Hz ({run['algorithm']})"
-
-
-def _gains(run: Run, _runs: Sequence[Run]) -> str:
-    names = [f"controller.{sym}{i}" for sym in "KGB" for i in (1, 2, 3)]
-    values = {sym: [f"{_param(run, f'controller.{sym}{i}'):.4g}" for i in (1, 2, 3)]
-              for sym in "KGB"}  # fmt: skip
-    text = "; ".join(f"{k} = {', '.join(dict.fromkeys(v))}" for k, v in values.items())
-    return _as_paper(run, names, text)
-
-
-def _wall(run: Run, _runs: Sequence[Run]) -> str:
-    names = ["plant.wall_x", "plant.wall_k", "controller.wall_depth"]
-    x, k, depth = (_param(run, n) for n in names)
-    return _as_paper(run, names, f"x = {x} m, {k:g} N/m, {depth} m inside")
-
-
-def _start(run: Run, _runs: Sequence[Run]) -> str:
-    names = ["plant.x0", "plant.y0"]
-    return _as_paper(run, names, f"({_param(run, names[0])} m, {_param(run, names[1])} m)")
-
-
-def _settled(run: Run, _runs: Sequence[Run]) -> str:
-    f = run["summary"]["settled_force_N"]
-    return f"{f:.2f} N settled ({100 * (f - TARGET_FORCE) / TARGET_FORCE:+.1f} %)"
-
-
-def _impact(run: Run, _runs: Sequence[Run]) -> str:
-    s = run["summary"]
-    if "impact_peak_N" not in s:
-        return "no contact with the wall in this run"
-    phases = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in s["contact_phases_s"])
-    return f"peak {s['impact_peak_N']:.1f} N at {s['impact_peak_time_s']:.2f} s; contact {phases}"
-
-
-def _observer(run: Run, _runs: Sequence[Run]) -> str:
-    s = run["summary"]
-    rms = s.get("observer_error_rms_after_2s_m_s")
-    tail = "" if rms is None else f", rms after 2 s {rms:.5f} m/s"
-    return f"max {s['observer_error_max_m_s']:.4f} m/s{tail}"
-
-
-def _tracking(run: Run, _runs: Sequence[Run]) -> str:
-    e = run["summary"]["tracking_error_before_contact_m"]
-    return f"position error before contact (from 2 s): {1e3 * e:.2f} mm max"
-
-
-def _torques(run: Run, _runs: Sequence[Run]) -> str:
-    return "peaks " + ", ".join(f"{v:.1f}" for v in run["summary"]["peak_torque_N_m"]) + " N m"
-
-
-def _difference(_run: Run, runs: Sequence[Run]) -> str | None:
-    diff = [r for r in runs if r.get("parameters", {}).get("controller", {}).get(
-        "velocity_source") in (2, "difference")]  # fmt: skip
-    if not diff:
-        return None
-    return "; ".join(
-        f"{r.get('scenario')} ({r.get('algorithm')}, {r.get('stop_time')} s): "
-        + ("stays bounded" if r.get("status") == "ok" else f"{r.get('status')}: {r.get('error')}")
-        for r in diff
-    )
-
-
-_P = PAPER_PARAMETERS
-# fmt: off
-PAPER: tuple[Claim, ...] = (  # what section 5 and Figs. 1-4 state: the one place in the code
-    Claim("update frequency", f"{1 / _P['controller.sample_period']:.0f} Hz", "section 5", _rate),
-    Claim("gains", "observer K = 50 I; controller G = 1000 I, B = 2 sqrt(1000) I", "section 5",
-          _gains),
-    Claim("wall", f"x = {_P['plant.wall_x']} m, stiffness {_P['plant.wall_k']:g} N/m, virtual "
-          f"trajectory {_P['controller.wall_depth']} m inside", "section 5", _wall),
-    Claim("start pose", f"end effector at ({_P['plant.x0']} m, {_P['plant.y0']} m)",
-          "section 5, Fig. 1a", _start),
-    Claim("contact force", f"{TARGET_FORCE:.1f} N (10^4 N/m x 0.00196 m)", "section 5, Fig. 1d",
-          _settled),
-    Claim("impact", "a tracking overshoot at contact (no value given)", "Fig. 1b, 1d", _impact),
-    Claim("observer error", "tends to zero in x and y", "Fig. 2c, 2d", _observer),
-    Claim("tracking", "follows the desired path; velocity errors from start-up, impact and "
-          "separation", "Fig. 1a, Fig. 3", _tracking),
-    Claim("joint torques", "well within a PUMA-560's capability (no values given)", "Fig. 1c",
-          _torques),
-    Claim("numerical differentiation in the loop", "unstable: the oscillations amplify",
-          "Fig. 4b", _difference),
-)
-# fmt: on
 
 
 # --- HTML pieces ------------------------------------------------------------------------------
@@ -190,7 +75,7 @@ def png_data_uri(path: Path) -> tuple[str, int, int] | None:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii"), width, height
 
 
-def _figures(paths: Sequence[Path]) -> str:
+def _figures(paths: Sequence[Path], none: str = "") -> str:
     parts = []
     for path in paths:
         name = Path(path).name
@@ -201,7 +86,7 @@ def _figures(paths: Sequence[Path]) -> str:
             uri, w, h = image
             parts.append(f'<figure><img src="{uri}" alt="{_e(caption)}" width="{w}" height="{h}">'
                          f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
-    return "".join(parts) or "<p>No figures were made by this command.</p>"
+    return "".join(parts) or f"<p>{_e(none or 'No figures were made by this command.')}</p>"
 
 
 def _page(title: str, body: str) -> str:
@@ -259,6 +144,11 @@ def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path) -> list
     return [*files, "run.json (provenance)", f"{REPORT_NAME} (this page)"]
 
 
+def _main(runs: Sequence[Run]) -> Run:
+    """The run the summary is about: the first with one (the chosen scenario), else the first."""
+    return next((r for r in runs if "summary" in r), runs[0] if runs else {})
+
+
 def run_report(
     record: Mapping[str, Any],
     figures: Sequence[Path] = (),
@@ -267,31 +157,61 @@ def run_report(
 ) -> str:
     """The page of one `impedance-cosim run` (or swap): record is its run.json, figures the PNG
     files it wrote, error the exception it is ending with (if any)."""
-    runs = list(record.get("runs", []))
-    main = next((r for r in runs if "summary" in r), runs[0] if runs else {})
     ok, problems = _status(record, error)
     command = record.get("command") or []
     verb = command[1] if len(command) > 1 else "run"
-    scenario = main.get("scenario") or "no scenario"
+    scenario = _main(record.get("runs", [])).get("scenario") or "no scenario"
     title = f"impedance-cosim {verb}: {scenario}, {'ok' if ok else 'FAILED'}"
     kept = ", ".join(_kept(record, figures, out))
     banner = f"All runs finished. Files: {kept}." if ok else (
         f"This command FAILED: {problems}. Kept in the results folder: {kept}.")  # fmt: skip
-    parts = [f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>']
+    body = _run_sections(record, figures, f"this command ({scenario})", "run.json",
+                         "The columns of the CSV files that have a unit")  # fmt: skip
+    return _page(title, f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>\n{body}')
 
-    parts.append("<h2>The summary against the paper</h2>")
-    if "summary" not in main:
-        parts.append("<p>No summary: the main run did not finish.</p>")
+
+def result_report(record: Mapping[str, Any], figures: Sequence[Path] = ()) -> str:
+    """The page of a Result of the Python API (impedance_cosim.simulate): record is its
+    provenance (run.json's form, with the call instead of a command), figures its PNG files."""
+    ok, problems = _status(record, None)
+    main = _main(record.get("runs", []))
+    scenario = main.get("scenario") or "no scenario"
+    call = str(record.get("call") or "simulate(...)")
+    title = f"impedance_cosim.{call.partition('(')[0]}: {scenario}, {'ok' if ok else 'FAILED'}"
+    rows = main.get("rows", 0)
+    banner = f"The run reached its stop time ({rows} rows)." if ok else (
+        f"This run FAILED: {problems}. The Result keeps its {rows} rows.")  # fmt: skip
+    units = "The signals that have a unit"
+    none = f"No figures: {'the run has no summary' if ok else 'the run did not finish'}."
+    body = _run_sections(record, figures, f"this run ({scenario})", "Result.provenance", units,
+                         none)  # fmt: skip
+    return _page(title, f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>\n{body}')
+
+
+def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: str, source: str,
+                  units: str, no_figures: str = "") -> str:  # fmt: skip
+    """The summary against the paper (and its every value), figures, runs, provenance and units
+    of a run's page; column heads the measured values, source names where the record is kept."""
+    runs = list(record.get("runs", []))
+    main = _main(runs)
+    parts = ["<h2>The summary against the paper</h2>"]
+    if not main.get("summary"):  # the API's summary_error reads "no summary: <why>"
+        reason = main.get("summary_error") or "no summary: the main run did not finish"
+        parts.append(f"<p>{_e(reason[:1].upper() + reason[1:])}.</p>")
     rows = []
     for c in PAPER:
         try:
             measured = c.measured(main, runs)
-        except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        except (AttributeError, KeyError, TypeError, ValueError, ZeroDivisionError):
             measured = None
         rows.append((c.quantity, c.paper, c.source, measured or "not in this run"))
-    parts.append(_table(["", "the paper", "where", f"this command ({scenario})"], rows))
+    parts.append(_table(["", "the paper", "where", column], rows))
+    if main.get("summary"):
+        values = [(k, _plain(v)) for k, v in main["summary"].items()]
+        parts.append("<details><summary>Every value of the summary</summary>"
+                     f"{_table(['quantity', 'value'], values)}</details>")  # fmt: skip
 
-    parts.append("<h2>Figures</h2>" + _figures(figures))
+    parts.append("<h2>Figures</h2>" + _figures(figures, no_figures))
 
     parts.append("<h2>Runs</h2>")
     parts.append(_table(
@@ -302,29 +222,30 @@ def run_report(
           r.get("real_time_factor", ""), _plain(r.get("overrides") or ""), r.get("error") or "")
          for r in runs]))  # fmt: skip
 
-    parts.append(_provenance(record, runs))
-    units: dict[str, str] = {}
+    parts.append(_provenance(record, runs, source))
+    found: dict[str, str] = {}
     for r in runs:
-        units.update({k: v for k, v in r.get("units", {}).items() if k not in units})
-    parts.append("<h2>Signals and units</h2><p>The columns of the CSV files that have a unit "
-                 "(from the FMUs' model descriptions, as in run.json).</p>")  # fmt: skip
-    parts.append(_table(["signal", "unit"], sorted(units.items())) if units else "<p>None.</p>")
-    return _page(title, "\n".join(parts))
+        found.update({k: v for k, v in r.get("units", {}).items() if k not in found})
+    parts.append(f"<h2>Signals and units</h2><p>{_e(units)} (from the FMUs' model descriptions, "
+                 f"as in {_e(source)}).</p>")  # fmt: skip
+    parts.append(_table(["signal", "unit"], sorted(found.items())) if found else "<p>None.</p>")
+    return "\n".join(parts)
 
 
-def _provenance(record: Mapping[str, Any], runs: Sequence[Run]) -> str:
-    """Command, system archive, times, host, FMU files with sha256, parameters, versions."""
+def _provenance(record: Mapping[str, Any], runs: Sequence[Run], source: str) -> str:
+    """Command (or the API's call), system archive, times, host, FMU files with sha256,
+    parameters, versions."""
     system = record.get("system", {})
     command = record.get("command")
     head = [
-        ("command", shlex.join(command) if command else record.get("call", "")),
+        ("command", shlex.join(command)) if command else ("call", record.get("call", "")),
         ("system archive", system.get("ssp", "")),
         ("system archive sha256", system.get("sha256", "")),
         ("started (UTC)", record.get("started", "")),
         ("wall time [s]", record.get("wall_time_s", "")),
         ("host", " ".join(str(v) for v in record.get("host", {}).values())),
     ]
-    parts = ["<h2>Provenance</h2><p>As recorded in run.json.</p>", _table(["", ""], head)]
+    parts = [f"<h2>Provenance</h2><p>As recorded in {_e(source)}.</p>", _table(["", ""], head)]
     fmus: dict[tuple, list[str]] = {}
     for r in runs:
         for comp, f in r.get("fmus", {}).items():
@@ -352,6 +273,26 @@ def write_run_report(
 ) -> Path | None:
     """`report.html` in the results folder out (see run_report), written atomically."""
     return _write(Path(out) / REPORT_NAME, run_report(record, figures, error, Path(out)), error)
+
+
+def write_result_report(path: Path, record: Mapping[str, Any],
+                        signals: Mapping[str, Any] | None) -> Path:  # fmt: skip
+    """A Result's page at path (see result_report), written atomically, with Figs. 1-3 drawn from
+    signals (None: no figures); OSError (one line, with the path) when it cannot be written."""
+    import tempfile
+
+    from impedance_cosim.apps import analysis
+
+    draw = {"fig1_position_force.png": analysis.figure_1, "fig2_observer.png": analysis.figure_2,
+            "fig3_velocity_tracking.png": analysis.figure_3}  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="impcosim_report_") as tmp:
+        figures = [] if signals is None else [Path(tmp) / name for name in draw]
+        for figure in figures:
+            draw[figure.name](signals, figure)
+        page = result_report(record, figures)
+    written = _write(Path(path), page, None)
+    assert written is not None  # _write raises when there is no error to report
+    return written
 
 
 # --- the sweep report -------------------------------------------------------------------------

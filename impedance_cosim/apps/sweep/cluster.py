@@ -120,40 +120,68 @@ QUIET_WORKERS = {
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None, timeout: float = 3.0):
     """A dask Client: on an existing scheduler, or on a LocalCluster of single-threaded worker
-    processes (this machine's cores by default); the cluster is closed on exit."""
-    import logging
-
-    from distributed import Client, LocalCluster
+    processes (this machine's cores by default); the cluster is closed on exit. A Ctrl-C/SIGTERM
+    while it starts or closes is taken once that is done (a client or cluster torn half way
+    leaves dask's own tracebacks on stderr)."""
+    from impedance_cosim.util.interrupt import StopSignals
 
     if scheduler:
         check_scheduler(scheduler, timeout)
+    stack = contextlib.ExitStack()
+    with StopSignals() as starting:
         try:
-            client = Client(scheduler, timeout=f"{timeout}s")
-        except OSError as exc:
-            raise SweepError(
-                f"cannot connect to the dask scheduler at {scheduler}: {exc}"
-            ) from None
-        logging.disable(logging.CRITICAL)  # a lost scheduler: our one line, not dask's tracebacks
-        try:
-            with client:
-                yield client
-        finally:
-            logging.disable(logging.NOTSET)
-        return
+            client = _remote(stack, scheduler, timeout) if scheduler else _local(stack, workers)
+        except BaseException:
+            stack.close()
+            raise
+    try:
+        if starting.signum is not None:
+            signal.raise_signal(starting.signum)  # now, to the command's own handler
+        yield client
+    finally:
+        with StopSignals() as closing:
+            stack.close()
+        if closing.signum is not None:
+            signal.raise_signal(closing.signum)
+
+
+def _remote(stack: contextlib.ExitStack, scheduler: str, timeout: float) -> Any:
+    """A Client of the scheduler, closed by stack; dask's logging off while it is open (a lost
+    scheduler: our one line, not dask's tracebacks)."""
+    import logging
+
+    from distributed import Client
+
+    try:
+        client = Client(scheduler, timeout=f"{timeout}s")
+    except OSError as exc:
+        raise SweepError(f"cannot connect to the dask scheduler at {scheduler}: {exc}") from None
+    logging.disable(logging.CRITICAL)
+    stack.callback(logging.disable, logging.NOTSET)
+    return stack.enter_context(client)
+
+
+def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
+    """A LocalCluster and its Client, closed by stack. Its log level is CRITICAL (forked workers
+    inherit it): dask's ERROR lines are races of its own shutdown (e.g. a worker's heartbeat
+    when the cluster closes under a running task); a failed run is a row saying why."""
+    import logging
+
     import dask
+    from distributed import Client, LocalCluster
 
     n = workers or os.cpu_count() or 1
-    with (
-        dask.config.set(QUIET_WORKERS),
-        dask.config.set({"distributed.worker.multiprocessing-method": START_METHOD}),
+    method = {"distributed.worker.multiprocessing-method": START_METHOD}
+    stack.enter_context(dask.config.set({**QUIET_WORKERS, **method}))
+    cluster = stack.enter_context(
         LocalCluster(
             n_workers=n,
             threads_per_worker=1,
             processes=True,
             dashboard_address=":0",
-            silence_logs=logging.ERROR,
-        ) as cluster,
-        Client(cluster) as client,
-    ):
-        client.register_plugin(IgnoreSigint())  # Ctrl-C is the main process's
-        yield client
+            silence_logs=logging.CRITICAL,
+        )
+    )
+    client = stack.enter_context(Client(cluster))
+    client.register_plugin(IgnoreSigint())  # Ctrl-C is the main process's
+    return client

@@ -117,6 +117,27 @@ class Batcher:
         return batch
 
 
+def finished_tasks() -> Any:
+    """A stream of (future, result) as dask tasks finish (add futures to it), the results fetched
+    by dask's own thread: the caller never waits inside a dask call, where a Ctrl-C would leave
+    distributed's event loop with an exception of its own on stderr."""
+    from distributed import as_completed
+
+    return as_completed([], with_results=True, raise_errors=False)
+
+
+def task_result(future: Any, result: Any) -> Any:
+    """What a task from finished_tasks() returned; what it raised is raised here; CancelledError
+    when dask cancelled or lost it (e.g. the scheduler went away)."""
+    from concurrent.futures import CancelledError
+
+    if future.status == "finished":
+        return result
+    if future.status == "error":
+        raise result[1]
+    raise result if isinstance(result, CancelledError) else CancelledError(future.status)
+
+
 def _failed_row(point: dict, exc: BaseException) -> dict[str, Any]:
     row = dict(point)
     reason = " ".join(str(exc).split())
@@ -138,8 +159,6 @@ def run_dask(
     exception (e.g. Ctrl-C) the batches not yet finished are cancelled."""
     from concurrent.futures import CancelledError
 
-    from distributed import as_completed
-
     order = list(range(len(plan.points)) if indices is None else indices)
     data, digest = archive_payload(plan.ssp)
     payload = client.scatter(data, broadcast=True, hash=False)
@@ -148,7 +167,7 @@ def run_dask(
     batcher = Batcher({i: steps(plan.points[i], plan.options) for i in order}, workers, target_s)
     singles: list[int] = []  # points of failed batches, run again one per task
     batches: dict[str, tuple[Any, list[int]]] = {}  # task key -> (future, its points)
-    pending = as_completed()
+    pending = finished_tasks()
     rows: dict[int, dict] = {}
     lost: str | None = None  # dask cancelled a batch: submit no more
 
@@ -163,10 +182,10 @@ def run_dask(
     try:
         for _ in range(IN_FLIGHT * workers):
             submit()
-        for future in pending:
+        for future, result in pending:
             batch = batches.pop(future.key)[1]
             try:
-                results = future.result()
+                results = task_result(future, result)
             except RunInterruptedError:  # a worker's run was stopped by a signal: stop the sweep
                 raise
             except CancelledError as exc:  # e.g. the scheduler went away: not the points' fault

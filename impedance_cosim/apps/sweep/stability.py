@@ -13,11 +13,12 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Callable, Iterable
+from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.sweep.execute import RunsLostError
+from impedance_cosim.apps.sweep.execute import RunsLostError, finished_tasks, task_result
 from impedance_cosim.apps.sweep.plan import master_arguments
 from impedance_cosim.apps.sweep.worker import RunInterruptedError, prepare_worker, run_point
 
@@ -263,14 +264,10 @@ def run_study(
 
         return [b.row() for b in bisect_all(todo, submit, wait, **hooks)]
 
-    from distributed import as_completed
-
     payload = client.scatter(data, broadcast=True, hash=False)
     client.run(prepare_worker, data, digest)
     running: dict[str, tuple[Case, float, Any]] = {}  # task key -> case, value, future
-    # results fetched by as_completed itself: this thread never waits inside a dask call, where
-    # Ctrl-C would leave distributed's event loop with an exception of its own on stderr
-    stream = as_completed([], with_results=True, raise_errors=False)
+    stream = finished_tasks()  # this thread never waits inside a dask call (Ctrl-C)
 
     def submit_d(case: Case, x: float) -> None:
         f = client.submit(run_point, payload, digest, case.point(x), options, pure=False)
@@ -280,17 +277,16 @@ def run_study(
     def wait_d() -> tuple[Case, float, dict]:
         f, result = next(stream)
         case, x, _ = running.pop(f.key)
-        if f.status == "finished":
-            return case, x, result
-        if f.status == "error":
-            exc = result[1]
-            if isinstance(exc, RunInterruptedError):
-                raise exc
-            # the worker died: an unstable point with the reason
+        try:
+            return case, x, task_result(f, result)
+        except RunInterruptedError:
+            raise
+        except CancelledError:  # e.g. the scheduler went away: no verdict on this point
+            lost = f"dask lost the run at {case.quantity} = {x:g} ({f.status})"
+            raise RunsLostError(lost) from None
+        except Exception as exc:  # the worker died: an unstable point with the reason
             return case, x, {"status": "failed", "error": f"task failed: {type(exc).__name__}: "
                              + " ".join(str(exc).split())}  # fmt: skip
-        # e.g. the scheduler went away: no verdict on this point
-        raise RunsLostError(f"dask lost the run at {case.quantity} = {x:g} ({f.status})")
 
     try:
         return [b.row() for b in bisect_all(todo, submit_d, wait_d, **hooks)]

@@ -9,9 +9,10 @@ import signal
 import sys
 
 import impedance_cosim
-from impedance_cosim.apps import run as run_cmd
-from impedance_cosim.apps.options import REPO, CliError, add_run_options
 from impedance_cosim.util.interrupt import signal_name, sigterm_raises
+
+# The commands (numpy, fmpy, dask: up to a second to import) load inside main(), so that a
+# Ctrl-C while they load is caught by entry() like any other interrupt.
 
 
 class _Parser(argparse.ArgumentParser):
@@ -23,6 +24,9 @@ class _Parser(argparse.ArgumentParser):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the impedance-cosim command."""
+    from impedance_cosim.apps import run as run_cmd
+    from impedance_cosim.apps.options import REPO, add_run_options
+
     parser = _Parser(
         prog="impedance-cosim",
         description="Impedance control without velocity measurements, as FMI co-simulation.",
@@ -60,15 +64,23 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> None:
-    """The console script: main(), then leave the process safely (see fmu.exit_process)."""
-    from impedance_cosim.cosim.fmu import exit_process
+    """The console script: main(), then leave the process safely (see fmu.exit_process). A
+    Ctrl-C before a command has taken over its signals (while the modules load, the arguments
+    are read) is one line and exit status 130 too, never a traceback."""
+    try:
+        from impedance_cosim.cosim.fmu import exit_process
 
-    exit_process(main())
+        status = main()
+    except KeyboardInterrupt:
+        print("impedance-cosim: interrupted (SIGINT) while starting", file=sys.stderr)
+        raise SystemExit(128 + signal.SIGINT) from None
+    exit_process(status)
 
 
 def _dispatch(args: argparse.Namespace) -> int:
     """Run a subcommand; every failure becomes one line on stderr and an exit status:
     2 bad input, 1 a failed run or other error, 128 + signal number when interrupted."""
+    from impedance_cosim.apps.options import CliError
     from impedance_cosim.cosim.fmu import FmuError
     from impedance_cosim.cosim.master import MasterError
     from impedance_cosim.cosim.ssp import SspError

@@ -138,3 +138,31 @@ def test_version(capsys):
         main(["--version"])
     assert stop.value.code == 0
     assert capsys.readouterr().out.strip() == f"impedance-cosim {impedance_cosim.__version__}"
+
+
+def test_ctrl_c_while_starting_is_one_line(monkeypatch, capsys):
+    """A Ctrl-C before a command has taken over its signals (the commands' modules loading,
+    the arguments being read) is one line and exit status 130, not a traceback."""
+    from impedance_cosim import cli
+    from impedance_cosim.apps import options
+
+    def interrupted_import(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(options, "add_run_options", interrupted_import)  # inside main()
+    with pytest.raises(SystemExit) as stop:
+        cli.entry()
+    assert stop.value.code == 130
+    err = capsys.readouterr().err
+    assert err == "impedance-cosim: interrupted (SIGINT) while starting\n"
+
+
+def test_the_command_line_module_loads_no_command():
+    """impedance_cosim.cli imports the commands (numpy, fmpy, dask) only inside main(), so
+    entry() is in place before the slow imports start."""
+    import subprocess
+    import sys
+
+    code = "import sys, impedance_cosim.cli; print(sorted({'numpy', 'fmpy'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

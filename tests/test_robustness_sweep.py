@@ -497,9 +497,10 @@ def _worker_view() -> tuple[list[str], str, str]:
 @pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc")
 def test_local_workers_hold_no_lock_of_ours_and_leave_signals_to_us(tmp_path):
     """LocalCluster workers are forked from the sweep's process on Linux (fast start): they must
-    not keep its folder lock (a re-run would be refused while they live) nor its signal
+    not keep its folder or table lock (a re-run would be refused while they live) nor its signal
     handlers (Ctrl-C is the main process's; SIGTERM ends a worker)."""
     from impedance_cosim.apps.sweep.cluster import dask_client
+    from impedance_cosim.apps.sweep.table import _lock as table_lock
     from impedance_cosim.util.atomic import LOCK_NAME, FolderLock
 
     def handler(*_):
@@ -507,9 +508,13 @@ def test_local_workers_hold_no_lock_of_ours_and_leave_signals_to_us(tmp_path):
 
     previous = signal.signal(signal.SIGTERM, handler)
     try:
-        with FolderLock(tmp_path), dask_client(workers=1) as client:
+        with (
+            FolderLock(tmp_path),
+            table_lock(tmp_path / "sweep.csv.lock"),
+            dask_client(workers=1) as client,
+        ):
             ((files, sigint, sigterm),) = client.run(_worker_view).values()
     finally:
         signal.signal(signal.SIGTERM, previous)
-    assert not [f for f in files if f.endswith(LOCK_NAME)], files
+    assert not [f for f in files if f.endswith((LOCK_NAME, "sweep.csv.lock"))], files
     assert sigint == str(signal.SIG_IGN) and sigterm == str(signal.SIG_DFL)

@@ -77,7 +77,7 @@ def _remove_pending() -> None:
         discard(path)
 
 
-_HELD_LOCKS: set[int] = set()  # descriptors of the FolderLocks held by this process
+_HELD_LOCKS: set[int] = set()  # descriptors of the locks held by this process
 
 
 def _close_held_locks_in_child() -> None:
@@ -96,6 +96,16 @@ def _close_held_locks_in_child() -> None:
 
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_close_held_locks_in_child)
+
+
+@contextlib.contextmanager
+def lock_not_inherited(fd: int) -> Iterator[None]:
+    """While the block runs, a forked child (a dask worker) does not share the lock held on fd."""
+    _HELD_LOCKS.add(fd)
+    try:
+        yield
+    finally:
+        _HELD_LOCKS.discard(fd)
 
 
 class FolderLock:

@@ -22,6 +22,7 @@ from typing import Any
 
 from impedance_cosim.apps.sweep.metrics import METRICS
 from impedance_cosim.apps.sweep.plan import Plan, archive_payload, parse_value
+from impedance_cosim.util.atomic import lock_not_inherited
 
 FINISHED = ("ok", "diverged", "failed")  # a row with one of these is not run again on --resume
 PLAN_FORMAT = 1
@@ -161,7 +162,8 @@ def _lock(path: Path):
         f.truncate()
         f.write(f"pid {os.getpid()}\n")
         f.flush()
-        yield
+        with lock_not_inherited(f.fileno()):  # forked dask workers do not hold it
+            yield
     finally:
         with contextlib.suppress(OSError):
             path.unlink()

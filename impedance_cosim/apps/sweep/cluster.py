@@ -87,11 +87,11 @@ def check_scheduler(address: str, timeout: float = 3.0) -> None:
 
 
 # Workers of a LocalCluster are forked where the OS allows it safely (Linux): a spawned worker
-# starts a new interpreter and imports distributed, ~1.2 s of CPU each, which on 2 cores was the
-# whole difference between a 1.8x and a 2x study including the cluster's start (measured with
-# benchmarks/run_all.py: start 0.8 s spawned, 0.1 s forked). A forked worker starts from this
-# process, so it drops what belongs to it: the signal handlers (below) and folder locks
-# (util.atomic).
+# starts a new interpreter and imports distributed, which kept both cores busy while the cluster
+# started (0.8 s spawned, 0.1 s forked, timing dask_client's start on 2 cores); the 692-run study
+# including the start went from 1.78-1.97x to 2.13-2.22x (benchmarks/run_all.py). A forked
+# worker starts from this process, so it drops what belongs to it: the signal handlers (below)
+# and the locks (util.atomic.lock_not_inherited).
 START_METHOD = "fork" if sys.platform == "linux" else "spawn"
 
 

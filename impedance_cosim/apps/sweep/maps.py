@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from impedance_cosim.apps.sweep.metrics import metric_title
+
 DEFAULT_PLOTS = (
     "peak_torque_N_m",
     "settled_force_N",
@@ -72,7 +74,8 @@ def plot_map(
         else (min(values or [0.0]), max(values or [1.0]))
     )
     norm = LogNorm(lo, max(hi, lo * 1.001)) if log else Normalize(lo, hi if hi > lo else lo + 1)
-    title = title or metric
+    title = title or metric_title(metric)
+    what = metric_title(metric)
 
     def order(name: str) -> list[Any]:
         seen: dict[str, Any] = {}
@@ -81,13 +84,13 @@ def plot_map(
         return list(seen.values())
 
     if len(axes) == 1 or mode == "random":
-        fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+        fig, ax = plt.subplots(figsize=(7.2, 4.8), constrained_layout=True)
         x = axes[0]
         ok = [r for r in rows if r.get("status") == "ok" and r.get(metric) is not None]
         bad = [r for r in rows if r.get("status") != "ok"]
         if len(axes) == 1:
             ax.plot([r[x] for r in ok], [r[metric] for r in ok], "o-", ms=4)
-            ax.set_ylabel(metric)
+            ax.set_ylabel(what)
             if log:
                 ax.set_yscale("log")
             for r in bad:
@@ -118,7 +121,7 @@ def plot_map(
                 s=30,
                 label="not bounded",
             )
-            fig.colorbar(sc, ax=ax, label=metric)
+            fig.colorbar(sc, ax=ax, label=what)
             ax.set_ylabel(y)
             if bad:
                 ax.legend(fontsize=8)
@@ -127,7 +130,7 @@ def plot_map(
             ax.set_xscale("log")
         ax.set_xlabel(x)
         ax.set_title(title, fontsize=10)
-        save_figure(fig, path, dpi=90)
+        save_figure(fig, path, dpi=100)
         plt.close(fig)
         return
 
@@ -140,8 +143,8 @@ def plot_map(
     extra = axes[4:]
     if extra:  # more than four swept axes: one panel per remaining combination, in a row
         cvals = [None]
-    w = max(3.2, 0.42 * len(xs) + 1.2)
-    h = max(2.4, 0.3 * len(ys) + 1.0)
+    w = max(5.0, 0.5 * len(xs) + 1.6)
+    h = max(3.6, 0.36 * len(ys) + 1.4)
     fig, grid = plt.subplots(
         len(rvals),
         len(cvals),
@@ -180,16 +183,16 @@ def plot_map(
             image = ax.imshow(masked, origin="lower", aspect="auto", cmap=cmap, norm=norm)
             if annotate:
                 for (i, j), (s, colour) in text.items():
-                    ax.text(j, i, s, ha="center", va="center", fontsize=6, color=colour)
-            ax.set_xticks(range(len(xs)), [label(v) for v in xs], fontsize=7, rotation=45)
-            ax.set_yticks(range(len(ys)), [label(v) for v in ys], fontsize=7)
-            ax.set_xlabel(x, fontsize=8)
-            ax.set_ylabel(y, fontsize=8)
+                    ax.text(j, i, s, ha="center", va="center", fontsize=7, color=colour)
+            ax.set_xticks(range(len(xs)), [label(v) for v in xs], fontsize=8, rotation=45)
+            ax.set_yticks(range(len(ys)), [label(v) for v in ys], fontsize=8)
+            ax.set_xlabel(x, fontsize=9)
+            ax.set_ylabel(y, fontsize=9)
             parts = [f"{_short(prow)}={label(rv)}" if prow else "",
                      f"{_short(pcol)}={label(cv)}" if pcol else ""]  # fmt: skip
-            ax.set_title(", ".join(p for p in parts if p), fontsize=7)
-    fig.suptitle(f"{title}\nblack, label in red: not bounded (stopped at that time)", fontsize=8)
+            ax.set_title(", ".join(p for p in parts if p), fontsize=9)
+    fig.suptitle(f"{title}\nblack, label in red: not bounded (stopped at that time)", fontsize=10)
     if image is not None:
-        fig.colorbar(image, ax=grid, label=metric, shrink=0.8)
-    save_figure(fig, path, dpi=80)
+        fig.colorbar(image, ax=grid, label=what, shrink=0.8)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)

@@ -28,6 +28,29 @@ METRICS = (
     "xd_jitter_m_s",
 )
 
+# What each metric is, with its unit, for the maps' titles and colour bars.
+METRIC_TITLES = {
+    "t_end_s": "time the run ended (s)",
+    "contact_start_s": "time of first contact (s)",
+    "impact_peak_N": "impact peak of the contact force (N)",
+    "impact_peak_time_s": "time of the impact peak (s)",
+    "settled_force_N": "settled contact force (N)",
+    "tracking_error_before_contact_m": "tracking error before contact (m)",
+    "tracking_error_in_contact_m": "largest tracking error in contact, |e_y| (m)",
+    "observer_error_max_m_s": "largest observer error (m/s)",
+    "observer_error_rms_after_2s_m_s": "observer error, RMS after 2 s (m/s)",
+    "peak_torque_N_m": "peak joint torque (N m)",
+    "peak_torque1_N_m": "peak torque, joint 1 (N m)",
+    "peak_torque2_N_m": "peak torque, joint 2 (N m)",
+    "peak_torque3_N_m": "peak torque, joint 3 (N m)",
+    "xd_jitter_m_s": "x-velocity jitter in free motion (m/s)",
+}
+
+
+def metric_title(metric: str) -> str:
+    """A metric as a reader sees it ("settled contact force (N)"); unknown names as they are."""
+    return METRIC_TITLES.get(metric, metric)
+
 
 def _finite(v: Any) -> Any:
     if v is None:

@@ -1,0 +1,51 @@
+"""Sweep maps are readable: titled with what the metric is and its unit (not its column name),
+and large enough to read at a glance."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import pytest
+
+from impedance_cosim.apps.sweep.maps import plot_map
+from impedance_cosim.apps.sweep.metrics import METRIC_TITLES, METRICS, metric_title
+
+
+def _rows() -> list[dict]:
+    return [
+        {"system.rate": r, "controller.G1": g, "status": "ok" if r > 100 else "diverged",
+         "t_end_s": 0.4, "settled_force_N": 19.6 + r / 1000 + g / 1e4}
+        for r in (100, 200, 400, 800) for g in (500, 1000, 2000)
+    ]  # fmt: skip
+
+
+def test_every_metric_has_a_title_with_its_unit() -> None:
+    assert set(METRIC_TITLES) == set(METRICS)
+    for m in METRICS:
+        assert metric_title(m) != m and metric_title(m).endswith(")"), m
+    assert metric_title("nosuch") == "nosuch"
+
+
+@pytest.mark.parametrize("axes", [["system.rate"], ["system.rate", "controller.G1"]])
+def test_a_map_is_at_least_600_by_400_px_and_titled_in_words(
+    tmp_path: Path, axes: list[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import matplotlib.figure
+
+    titles: list[str] = []
+    for name in ("suptitle", "colorbar"):
+        original = getattr(matplotlib.figure.Figure, name)
+
+        def spy(self, *a, _original=original, **k):
+            titles.append(str(a[0] if a and isinstance(a[0], str) else k.get("label", "")))
+            return _original(self, *a, **k)
+
+        monkeypatch.setattr(matplotlib.figure.Figure, name, spy)
+    rows = _rows() if len(axes) == 2 else [r for r in _rows() if r["controller.G1"] == 500]
+    png = tmp_path / "map.png"
+    plot_map(rows, axes, "settled_force_N", png)
+    height, width = mpimg.imread(png).shape[:2]
+    assert width >= 600 and height >= 400, (width, height)
+    if len(axes) == 2:
+        assert any("settled contact force (N)" in t for t in titles), titles

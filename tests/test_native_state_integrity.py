@@ -23,6 +23,14 @@ import zlib
 from pathlib import Path
 
 import pytest
+from test_platforms import (  # the same tools as the closed-loop platform tests
+    host_path,
+    need_compiler,
+    run_command,
+    wine,  # noqa: F401  (a fixture run_command asks for)
+)
+
+from impedance_cosim.packaging.toolchains import BY_PLATFORM
 
 DT = 1 / 400
 PLANT, CONTROLLER = "PumaPlant.fmu", "ImpedanceController.fmu"
@@ -318,6 +326,74 @@ def test_a_state_with_non_finite_numbers_is_not_serialized(native_dir, fmi3_dir,
     assert done.returncode == 0, f"host died ({done.returncode}): {done.stderr[-2000:]}"
     assert f"serialize={ERROR}" in done.stdout and "not finite" in done.stdout
     assert "done" in done.stdout
+
+
+STATE_HOST = Path(__file__).parent / "c_host" / "state_host.c"
+
+
+def _build_state_host(platform: str, out: Path) -> Path:
+    from fmpy import __file__ as fmpy_init
+
+    exe = out / ("state_host.exe" if platform == "win64" else f"state_host_{platform}")
+    extra = ["-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc"] if platform == "win64" else ["-ldl"]
+    subprocess.run([need_compiler(platform).compiler, "-std=c99", "-O2", "-Wall", "-Wextra",
+                    "-Werror", f"-I{Path(fmpy_init).parent / 'c-code'}", str(STATE_HOST), *extra,
+                    "-o", str(exe)], check=True, capture_output=True, timeout=120)  # fmt: skip
+    return exe
+
+
+def _platform_state_run(platform: str, native_dir: Path, tmp_path: Path, request) -> str:
+    """state_host (built for platform, run under wine/qemu there) on the plant library of that
+    platform in the FMU archive: its own state, mutations of it and the linux64 library's state."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(native_dir / PLANT))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    shutil.unpack_archive(native_dir / PLANT, tmp_path / "fmu", "zip")
+
+    def run(plat: str, *args: str) -> str:
+        prefix, env = run_command(plat, request)
+        lib = tmp_path / "fmu" / "binaries" / plat / f"PumaPlant{BY_PLATFORM[plat].suffix}"
+        inputs = f"{vr['q_noise']}=1e-4,{vr['tau1']}=30,{vr['tau2']}=20"
+        files = [host_path(plat, Path(a)) if "/" in a else a for a in args]
+        exe = _build_state_host(plat, tmp_path)
+        argv = [*prefix, str(exe), host_path(plat, lib), md.guid, "40", inputs, *files]
+        done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stdout[-1000:] + done.stderr[-1000:]
+        return done.stdout
+
+    run("linux64", "write", str(tmp_path / "linux64.bin"))
+    run(platform, "write", str(tmp_path / "own.bin"))
+    blob, at = (tmp_path / "own.bin").read_bytes(), HEADER + 8 * vr["q1"]  # Data.r[q1]
+    files = {"flipped": blob[:99] + bytes([blob[99] ^ 0x10]) + blob[100:], "cut": blob[:-1],
+             "extended": blob + b"\0",
+             "nan_output": fix_crc(blob[:at] + struct.pack("<d", math.nan) + blob[at + 8 :]),
+             "format1": struct.pack("<IIQ32s", 0x494D5043, 63, len(blob) - 64, b"PumaPlant")
+             + blob[48:]}  # fmt: skip
+    for name, data in files.items():
+        (tmp_path / f"{name}.bin").write_bytes(data)
+    names = ["own", "linux64", *files]
+    return run(platform, "read", *(str(tmp_path / f"{n}.bin") for n in names))
+
+
+@needs_cc
+@pytest.mark.parametrize("platform", ["linux64", "win64", "aarch64-linux"])
+def test_every_platform_refuses_bad_states_and_reads_the_others(
+    platform, native_dir, tmp_path, request
+):
+    """The plant's library for each platform in the archive: its own state and the linux64
+    library's restore (the layout is the same everywhere), each broken one is refused."""
+    out = _platform_state_run(platform, native_dir, tmp_path, request)
+    status = {}
+    for line in out.splitlines():
+        if not line.startswith("log "):
+            path, result = line.split(" ", 1)
+            status[path.replace("\\", "/").rsplit("/", 1)[-1]] = result
+    assert status["own.bin"] == status["linux64.bin"] == "0 step=0", out
+    for name in ("flipped", "cut", "extended", "nan_output", "format1"):
+        assert status[f"{name}.bin"] == "3", (name, out)
+    for words in ("checksum mismatch", "not finite", "older build", "truncated or extended"):
+        assert words in out, (words, out)
 
 
 if __name__ == "__main__":

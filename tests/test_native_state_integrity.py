@@ -216,7 +216,7 @@ def mutations(blob: bytes, reals: dict[str, int], rng: random.Random, count: int
     """(kind, bytes, expected words of the refusal): count random ones, then one per real."""
     n = len(blob)
     old = struct.pack("<IIQ32s", 0x494D5043, *struct.unpack_from("<I", blob, 8),
-                      n - HEADER, b"x")[:48] + blob[HEADER:]  # fmt: skip
+                      n - HEADER, b"x") + blob[HEADER:]  # fmt: skip
     yield "format 1", old, "older build"
     yield "format 1 + 16 bytes", old + bytes(16), "older build"
     for _ in range(count):
@@ -263,7 +263,7 @@ def drive(version: int, path: str, seed: int, count: int) -> None:
         into_before, logged = into.value, len(s.logs)
         status = s.deserialize(bad, into)
         if status != ERROR or len(s.logs) != logged + 1 or words not in s.logs[-1]:
-            print(f"ACCEPTED {kind}: status {status}, log {s.logs[logged:]}", flush=True)
+            print(f"UNEXPECTED {kind}: status {status}, log {s.logs[logged:]}", flush=True)
             continue
         assert into.value == into_before  # no state made, the one given not replaced
         assert s.outputs() == before, kind  # the instance is where it was
@@ -314,7 +314,7 @@ def test_every_mutated_serialized_state_is_refused(native_dir, fmi3_dir, version
     path = (native_dir if version == 2 else fmi3_dir) / name
     done = _run(version, path, 20, 1500)
     assert done.returncode == 0, f"host died ({done.returncode}): {done.stderr[-2000:]}"
-    assert "ACCEPTED" not in done.stdout, done.stdout[:3000]
+    assert "UNEXPECTED" not in done.stdout, done.stdout[:3000]  # accepted, or for another reason
     assert "done" in done.stdout
 
 

@@ -18,6 +18,7 @@ import shutil
 import struct
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import pytest
@@ -307,7 +308,9 @@ class Fuzzer:
 
     def mutate(self, blob: bytes) -> bytes:
         """A serialized state, often mutated: flipped bytes, random 32-bit or 64-bit words
-        (counters, enums, doubles), truncated or extended."""
+        (counters, enums, doubles), truncated or extended; in most mutated bodies the checksum
+        is recomputed (fmi2_glue.c's SerialHeader: CRC-32 at byte 60 of a 64-byte header), so
+        that the checks behind it get random bodies too."""
         r = self.rng
         b = bytearray(blob)
         roll = r.random()
@@ -316,7 +319,7 @@ class Fuzzer:
         if roll < 0.3:
             return bytes(b[: r.randrange(len(b))]) if r.random() < 0.5 else bytes(b) + b"\0"
         for _ in range(r.choice([1, 1, 2, 5, 50])):
-            at = r.randrange(48, len(b) - 8)  # the body (the header is checked separately)
+            at = r.randrange(64, len(b) - 8)  # the body (the header is checked separately)
             kind = r.random()
             if kind < 0.3:
                 b[at] ^= 1 << r.randrange(8)
@@ -324,8 +327,10 @@ class Fuzzer:
                 struct.pack_into("<i", b, at - at % 4, r.choice(INTS + [624, 625, -624, 3, 9]))
             else:
                 struct.pack_into("<d", b, at - at % 8, self.real())
+        if r.random() < 0.8:
+            struct.pack_into("<I", b, 60, zlib.crc32(bytes(b[:60] + b[64:])))
         if r.random() < 0.05:
-            b[r.randrange(48)] ^= 0xFF  # the header
+            b[r.randrange(64)] ^= 0xFF  # the header
         return bytes(b)
 
     def run(self, calls: int) -> None:

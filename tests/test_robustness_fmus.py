@@ -14,6 +14,7 @@ import struct
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 
 import pytest
@@ -101,10 +102,11 @@ class Slave:
         return self.f["fmi2DeSerializeFMUstate"](self.c, buf, len(blob), ctypes.byref(state)), state
 
 
-# Native FMU state layout (fmi2_glue.c, instance.h): SerialHeader (48 bytes), then Snapshot =
-# Data (r[N], i[N], s[N][64], ModelState, start_time), phase, dirty, last_time, me_time,
-# me_time_set, event_switches. Offsets from the body's end (checked on a valid state below).
-HEADER = 48
+# Native FMU state layout (fmi2_glue.c, instance.h): SerialHeader (64 bytes, its CRC-32 at 60),
+# then Snapshot = Data (r[N], i[N], s[N][64], ModelState, start_time), phase, dirty, last_time,
+# me_time, me_time_set, event_switches. Offsets from the body's end (checked on a valid state
+# below). The crafted bodies get their checksum recomputed, so that the field checks are tested.
+HEADER = 64
 PHASE, DIRTY, LAST_TIME, START_TIME = -32, -28, -24, -40
 ME_TIME_SET, EVENT_SWITCHES = -8, -4
 PLANT_RNG_INDEX, PLANT_GAUSS_FLAG = -56, -52  # PyRandom's index, has_gauss_next (end of ModelState)
@@ -162,7 +164,9 @@ def crafted_state(s: Slave, blob: bytes, name: str, field: str) -> bytes:
             blob, HEADER + 8 * n + 4 * s.vr["max_samples_per_step"], "<i", 0
         ),
     }
-    return cases[field]()
+    crafted = bytearray(cases[field]())
+    struct.pack_into("<I", crafted, 60, zlib.crc32(bytes(crafted[:60] + crafted[HEADER:])))
+    return bytes(crafted)
 
 
 def case_crafted(path: str, field: str) -> None:

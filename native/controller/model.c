@@ -549,6 +549,18 @@ int model_check_state(const Data *d, char *msg)
     return 0;
 }
 
+/* Every double of ModelState (glue.h). In memory, yhat and tau_prev may overflow to inf or NaN
+ * under extreme gains (as in the Python model); a serialized state must hold finite ones. */
+const StateReals MODEL_STATE_REALS[] = {
+    {"controller t", offsetof(ModelState, t), 1},
+    {"controller start_time", offsetof(ModelState, start_time), 1},
+    {"controller yhat", offsetof(ModelState, yhat), 3},
+    {"controller q_prev", offsetof(ModelState, q_prev), 3},
+    {"controller tau_prev", offsetof(ModelState, tau_prev), 3},
+    {"controller f_prev", offsetof(ModelState, f_prev), 3},
+};
+const int N_MODEL_STATE_REALS = (int)(sizeof MODEL_STATE_REALS / sizeof MODEL_STATE_REALS[0]);
+
 /* --- Model Exchange (model_me.h) --------------------------------------------------------------
  * A sampled-data model: no continuous states and no event indicators. Each sample instant
  * t_k = start_time + k * sample_period is a time event; at it the sample is taken from the

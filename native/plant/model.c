@@ -510,6 +510,17 @@ int model_check_state(const Data *d, char *msg)
     return 0;
 }
 
+/* Every double of ModelState (glue.h), the generator's cached deviate included (0.0 when none). */
+const StateReals MODEL_STATE_REALS[] = {
+    {"plant t", offsetof(ModelState, t), 1},
+    {"plant q", offsetof(ModelState, q), 3},
+    {"plant qd", offsetof(ModelState, qd), 3},
+    {"plant h", offsetof(ModelState, h), 1},
+    {"plant q_meas", offsetof(ModelState, q_meas), 3},
+    {"plant noise generator's gauss_next", offsetof(ModelState, rng.gauss_next), 1},
+};
+const int N_MODEL_STATE_REALS = (int)(sizeof MODEL_STATE_REALS / sizeof MODEL_STATE_REALS[0]);
+
 /* --- Model Exchange (instance.h) ------------------------------------------------------------
  * The continuous states are (q1..q3, qd1..qd3), the order of the state vector y of plant_rhs and
  * of PlantModel.MODEL_EXCHANGE.states; the derivatives come from plant_rhs itself, the right-hand

@@ -5,10 +5,13 @@
  * Errors are always logged (whatever fmi2SetDebugLogging says); other messages only with logging
  * on. Parameter values are checked when set (finite, >= min) and again before initialization;
  * non-finite inputs are refused when set. A step that cannot be taken returns fmi2Discard and
- * leaves the instance at the step's start.
+ * leaves the instance at the step's start. A serialized FMU state carries a CRC-32 over all its
+ * bytes and holds finite numbers only: anything else is refused (fmi2Error, logged), and so is
+ * the state of another build (see SerialHeader).
  */
 #include <math.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,7 +21,6 @@
 #include "guid.h" /* MODEL_GUID, written by the build */
 #include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is fmi2_me.c */
 
-#define SERIAL_MAGIC 0x494d5043u   /* "IMPC" */
 #define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
 #define STATE_MAGIC 0x494d5053u    /* "IMPS" */
 
@@ -31,12 +33,25 @@ typedef struct {
     Snapshot s;
 } StateBox;
 
+/* A serialized FMU state (format 2): this header, then the Snapshot's bytes. The header has the
+ * same layout on every platform (fixed-width fields, 64 bytes); the checksum (CRC-32, the one of
+ * zlib and of the Python FMUs' states) covers the header before it and the whole body, so a state
+ * that is not one this FMU wrote (bytes flipped, cut, added, or another build's) is refused before
+ * any of it is read. A body that passes the checksum is still checked field by field
+ * (check_snapshot, check_finite): a checksum is no proof of origin, anyone can recompute it. */
+#define SERIAL_MAGIC "IMPCNAT2"         /* native state, format 2 */
+#define SERIAL_MAGIC_FORMAT1 0x494d5043u /* format 1 (no checksum): the first 4 bytes, "CPMI" */
+#define SERIAL_GUID_MAX 40
 typedef struct {
-    unsigned magic;
-    unsigned n_vars;
-    unsigned long size;
-    char identifier[32];
+    char magic[8];                /* SERIAL_MAGIC */
+    uint32_t n_vars;              /* N_VARS */
+    uint32_t body_size;           /* sizeof(Snapshot) */
+    char guid[SERIAL_GUID_MAX];   /* MODEL_GUID of the build that wrote it, NUL-padded */
+    uint32_t flags;               /* 0 */
+    uint32_t crc;                 /* CRC-32 of the 60 bytes above and of the body */
 } SerialHeader;
+typedef char serial_header_is_64_bytes[sizeof(SerialHeader) == 64 ? 1 : -1];
+typedef char guid_fits_the_header[sizeof MODEL_GUID <= SERIAL_GUID_MAX ? 1 : -1];
 
 int fail(char *msg, const char *fmt, ...)
 {
@@ -704,6 +719,64 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
     return fmi2OK;
 }
 
+/* CRC-32 (IEEE 802.3, reflected, as zlib's crc32) of n bytes, continuing from crc (0 to start).
+ * Bitwise and branch-free: states are a few kilobytes, serialized rarely. */
+static uint32_t crc32_update(uint32_t crc, const unsigned char *p, size_t n)
+{
+    crc = ~crc;
+    while (n--) {
+        crc ^= *p++;
+        for (int k = 0; k < 8; k++) {
+            crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+        }
+    }
+    return ~crc;
+}
+
+/* The checksum a header and body must carry: over the header up to its crc field, then the body. */
+static uint32_t serial_crc(const SerialHeader *header, const unsigned char *body)
+{
+    const uint32_t crc = crc32_update(0, (const unsigned char *)header, offsetof(SerialHeader, crc));
+    return crc32_update(crc, body, sizeof(Snapshot));
+}
+
+/* A serialized state holds finite numbers only: every Real slot, the times and every double of
+ * the model's state (in memory a state may hold what a run reached, e.g. an overflowed observer;
+ * such a state is not serialized, so nothing refused on the way in was ever written). */
+static int check_finite(const Snapshot *s, char *msg)
+{
+    if (!isfinite(s->d.start_time) || !isfinite(s->last_time) || !isfinite(s->me_time)) {
+        return fail(msg, "a time (start, last communication point or Model Exchange time) is "
+                         "not finite");
+    }
+    for (int vr = 0; vr < N_VARS; vr++) {
+        if (!isfinite(s->d.r[vr])) {
+            return fail(msg, "the value of %s is not finite (%g)", VARS[vr].name, s->d.r[vr]);
+        }
+    }
+    for (int k = 0; k < N_MODEL_STATE_REALS; k++) {
+        const StateReals *f = &MODEL_STATE_REALS[k];
+        for (int j = 0; j < f->count; j++) {
+            double x;
+            memcpy(&x, (const char *)&s->d.m + f->offset + j * sizeof x, sizeof x);
+            if (!isfinite(x)) {
+                return fail(msg, "%s[%d] is not finite (%g)", f->name, j, x);
+            }
+        }
+    }
+    return 0;
+}
+
+/* The header this build writes, without its checksum (crc = 0). */
+static void serial_header(SerialHeader *header)
+{
+    memset(header, 0, sizeof *header);
+    memcpy(header->magic, SERIAL_MAGIC, sizeof header->magic);
+    header->n_vars = N_VARS;
+    header->body_size = (uint32_t)sizeof(Snapshot);
+    memcpy(header->guid, MODEL_GUID, sizeof MODEL_GUID);
+}
+
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     Instance *inst = (Instance *)c;
@@ -724,6 +797,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte s
                                  size_t size)
 {
     Instance *inst = (Instance *)c;
+    const StateBox *box = (const StateBox *)state;
     SerialHeader header;
     if (!instance_ok(inst, "fmi2SerializeFMUstate")) {
         return fmi2Error;
@@ -732,24 +806,61 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte s
         return ERROR(inst, "fmi2SerializeFMUstate: NULL state or buffer smaller than %lu bytes",
                      (unsigned long)(sizeof header + sizeof(Snapshot)));
     }
-    if (!state_ok(inst, (const StateBox *)state, "fmi2SerializeFMUstate")) {
+    if (!state_ok(inst, box, "fmi2SerializeFMUstate")) {
         return fmi2Error;
     }
-    memset(&header, 0, sizeof header);
-    header.magic = SERIAL_MAGIC;
-    header.n_vars = N_VARS;
-    header.size = sizeof(Snapshot);
-    strncpy(header.identifier, MODEL_IDENTIFIER_STR, sizeof header.identifier - 1);
+    if (check_finite(&box->s, inst->msg)) {
+        return ERROR(inst, "fmi2SerializeFMUstate: the state holds a number that is not finite "
+                           "(%s): not serialized (it could not be restored)", inst->msg);
+    }
+    serial_header(&header);
+    header.crc = serial_crc(&header, (const unsigned char *)&box->s);
     memcpy(serializedState, &header, sizeof header);
-    memcpy(serializedState + sizeof header, &((const StateBox *)state)->s, sizeof(Snapshot));
+    memcpy(serializedState + sizeof header, &box->s, sizeof(Snapshot));
     return fmi2OK;
+}
+
+/* Bytes from outside, checked in order: big enough for a header, our magic (with a word for a
+ * state of an older build), this FMU's layout and build, the exact size, the checksum; then the
+ * body's fields (check_finite, check_snapshot). 0 with the body in *body, else 1 with msg set. */
+static int decode_state(const unsigned char *bytes, size_t size, Snapshot *body, char *msg)
+{
+    const size_t expected = sizeof(SerialHeader) + sizeof(Snapshot);
+    SerialHeader header, ours;
+    uint32_t format1;
+    if (size < sizeof header) {
+        return fail(msg, "%lu bytes, not a state of this FMU (%lu bytes)", (unsigned long)size,
+                    (unsigned long)expected);
+    }
+    memcpy(&header, bytes, sizeof header);
+    memcpy(&format1, bytes, sizeof format1);
+    if (format1 == SERIAL_MAGIC_FORMAT1) {
+        return fail(msg, "written by an older build of a native FMU (state format 1, without a "
+                         "checksum); states do not carry across builds");
+    }
+    if (memcmp(header.magic, SERIAL_MAGIC, sizeof header.magic) != 0) {
+        return fail(msg, "not a serialized state of a native FMU (bad magic)");
+    }
+    serial_header(&ours);
+    if (memcmp(&header, &ours, offsetof(SerialHeader, crc)) != 0) { /* every byte up to crc */
+        return fail(msg, "written by another FMU or another build (this is %s, GUID %s); states "
+                         "do not carry across builds", MODEL_IDENTIFIER_STR, MODEL_GUID);
+    }
+    if (size != expected) {
+        return fail(msg, "%lu bytes, expected %lu (truncated or extended)", (unsigned long)size,
+                    (unsigned long)expected);
+    }
+    if (serial_crc(&header, bytes + sizeof header) != header.crc) {
+        return fail(msg, "checksum mismatch (the bytes are not the ones this FMU wrote)");
+    }
+    memcpy(body, bytes + sizeof header, sizeof *body);
+    return check_finite(body, msg);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
-    SerialHeader header;
     Snapshot body;
     StateBox *box;
     if (!instance_ok(inst, "fmi2DeSerializeFMUstate")) {
@@ -758,20 +869,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (!state) {
         return ERROR(inst, "fmi2DeSerializeFMUstate: the state pointer is NULL");
     }
-    if (!serializedState || size != sizeof header + sizeof(Snapshot)) {
-        return ERROR(inst, "serialized state has %lu bytes, expected %lu",
-                     (unsigned long)size, (unsigned long)(sizeof header + sizeof(Snapshot)));
+    if (!serializedState) {
+        return ERROR(inst, "fmi2DeSerializeFMUstate: serialized state refused: NULL bytes");
     }
-    memcpy(&header, serializedState, sizeof header);
-    if (header.magic != SERIAL_MAGIC || header.n_vars != N_VARS ||
-        header.size != sizeof(Snapshot) ||
-        strncmp(header.identifier, MODEL_IDENTIFIER_STR, sizeof header.identifier) != 0) {
-        return ERROR(inst, "serialized state is not from a %s FMU of this build",
-                     MODEL_IDENTIFIER_STR);
-    }
-    memcpy(&body, serializedState + sizeof header, sizeof body);
-    if (check_snapshot(&body, inst->type, inst->msg)) {
-        return ERROR(inst, "serialized state refused: %s", inst->msg);
+    if (decode_state((const unsigned char *)serializedState, size, &body, inst->msg) ||
+        check_snapshot(&body, inst->type, inst->msg)) {
+        return ERROR(inst, "fmi2DeSerializeFMUstate: serialized state refused: %s", inst->msg);
     }
     box = state_for_writing(inst, state, "fmi2DeSerializeFMUstate");
     if (!box) {

@@ -59,6 +59,16 @@ int model_check_tunable(const Data *d, char *msg);
  * has checked the parameters and inputs in d). 0 if usable, else 1 with the reason in msg. */
 int model_check_state(const Data *d, char *msg);
 
+/* The reals of the model's ModelState (name, byte offset, count), for the check that a
+ * serialized state holds only finite numbers: every double in ModelState is listed. */
+typedef struct {
+    const char *name;
+    size_t offset;
+    int count;
+} StateReals;
+extern const StateReals MODEL_STATE_REALS[];
+extern const int N_MODEL_STATE_REALS;
+
 /* snprintf into msg (MSG_MAX bytes); returns 1 so models can write `return fail(msg, ...)` */
 int fail(char *msg, const char *fmt, ...);
 

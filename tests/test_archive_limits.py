@@ -217,3 +217,27 @@ def test_members_names_and_links_are_checked_before_anything_runs(
     assert lines[0].startswith(f"impedance-cosim swap: error: {fmu}"), lines
     assert re.search(message, lines[0]), lines
     assert not (tmp_path / "out").exists()
+
+
+def test_the_bytes_unpacked_are_counted_against_the_limits_too(native_dir, tmp_path):
+    """The second count, on its own: members checked from their headers under the default
+    limits, then extracted under smaller ones, stop at the limit from the bytes written (a
+    header that passed cannot make extraction write more)."""
+    from impedance_cosim.cosim.archive import Limits, checked, extract
+
+    fmu = native_dir / PLANT
+    small = Limits(member_bytes=1000, total_bytes=DEFAULT_LIMITS.total_bytes)
+    with checked(fmu, "plant.fmu") as (archive, files):
+        big = max(files, key=lambda f: f.file_size)
+        assert big.file_size > 1000
+        folder = tmp_path / "a"
+        folder.mkdir()
+        with pytest.raises(ArchiveError, match=r"unpacks to more than 1000 bytes \(the limit\)"):
+            extract(archive, [big], folder, "plant.fmu", small)
+        assert bytes_under(folder) <= 1000  # a chunk is counted before it is written
+        folder = tmp_path / "b"
+        folder.mkdir()
+        total = sum(f.file_size for f in files) - 1
+        with pytest.raises(ArchiveError, match=f"plant.fmu unpacks to more than {total} bytes"):
+            extract(archive, files, folder, "plant.fmu", Limits(total_bytes=total))
+        assert bytes_under(folder) <= total

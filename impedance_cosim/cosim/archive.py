@@ -1,6 +1,7 @@
 """Safe handling of a zip archive from outside: an .ssp, an .fmu given to `swap --replace` or to
-the API, an FMU inside an .ssp. Every archive the project opens goes through `check_archive`
-(before anything reads a member) and `unpack` (the only extraction), with one set of limits.
+the API, an FMU inside an .ssp. Every archive the project opens goes through `checked` (before
+anything reads a member: check_archive, unpack and the SSP reader use it) and is extracted only
+by `extract` (through unpack or the SSP reader), with one set of limits.
 
 An archive is hostile until checked: no absolute names, `..`, backslashes, drive letters,
 symbolic links, duplicates or encrypted members; member count, member size and total size are
@@ -15,6 +16,8 @@ import stat
 import unicodedata
 import zipfile
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -207,10 +210,15 @@ def _write(
     with os.fdopen(os.open(parent / parts[-1], flags, 0o600), "wb") as out:
         for chunk in _chunks(archive, info, where):
             size += len(chunk)
-            if size > min(info.file_size, limits.member_bytes):
+            if size > info.file_size:
                 raise ArchiveError(
                     f"{where}: member {info.filename!r} unpacks to more than its header says"
                     f" ({info.file_size} bytes)"
+                )
+            if size > limits.member_bytes:
+                raise ArchiveError(
+                    f"{where}: member {info.filename!r} unpacks to more than"
+                    f" {limits.member_bytes} bytes (the limit)"
                 )
             if total + size > limits.total_bytes:
                 raise ArchiveError(f"{where} unpacks to more than {limits.total_bytes} bytes")
@@ -218,13 +226,23 @@ def _write(
     return size
 
 
+@contextmanager
+def checked(
+    path: Path, where: str, limits: Limits = DEFAULT_LIMITS, kind: str = "a zip archive"
+) -> Iterator[tuple[zipfile.ZipFile, list[zipfile.ZipInfo]]]:
+    """The one way the project opens an archive: (the open archive, its file members) after
+    every check that needs no member's bytes (count, names, types, methods, declared sizes);
+    ArchiveError naming `where` and the member otherwise."""
+    with open_zip(path, where, limits, kind) as archive:
+        yield archive, check_members(archive, where, limits)
+
+
 def check_archive(
     path: Path, where: str, limits: Limits = DEFAULT_LIMITS, kind: str = "a zip archive"
 ) -> list[zipfile.ZipInfo]:
-    """The file members of an archive after every check that needs no member's bytes (count,
-    names, types, methods, declared sizes); ArchiveError naming `where` and the member."""
-    with open_zip(path, where, limits, kind) as archive:
-        return check_members(archive, where, limits)
+    """The file members of an archive that passes `checked`."""
+    with checked(path, where, limits, kind) as (_, files):
+        return files
 
 
 def unpack(
@@ -234,9 +252,8 @@ def unpack(
     limits: Limits = DEFAULT_LIMITS,
     kind: str = "a zip archive",
 ) -> list[zipfile.ZipInfo]:
-    """Check the archive (check_archive) and extract its files into the existing folder,
-    counting the bytes unpacked against the same limits; returns the file members."""
-    with open_zip(path, where, limits, kind) as archive:
-        files = check_members(archive, where, limits)
+    """Check the archive (`checked`) and extract its files into the existing folder, counting
+    the bytes unpacked against the same limits; returns the file members."""
+    with checked(path, where, limits, kind) as (archive, files):
         extract(archive, files, folder, where, limits)
     return files

@@ -15,7 +15,13 @@ from typing import Any
 
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 
-from impedance_cosim.cosim.archive import DEFAULT_LIMITS, ArchiveError, check_archive, unpack
+from impedance_cosim.cosim.archive import (
+    DEFAULT_LIMITS,
+    ArchiveError,
+    check_archive,
+    checked,
+    unpack,
+)
 
 EXTRACT_PREFIX = "impcosim_fmu_"  # extraction folders in the temporary directory
 DESCRIPTION = "modelDescription.xml"
@@ -74,10 +80,12 @@ def check_fmu(fmu: Path, description: Any) -> None:
 @lru_cache(maxsize=256)
 def _archive_problem(fmu: str, _mtime_ns: int, _size: int, binary: str) -> str | None:
     name = Path(fmu).name
-    try:
-        with zipfile.ZipFile(fmu) as z:
+    try:  # the archive passed check_fmu_archive: testzip reads at most the sizes it allows
+        with checked(Path(fmu), name, DEFAULT_LIMITS, kind="an FMU archive") as (z, files):
             bad = z.testzip()
-            names = set(z.namelist())
+            names = {f.filename for f in files}
+    except ArchiveError as exc:
+        return str(exc)
     except (zipfile.BadZipFile, OSError, EOFError, RuntimeError) as exc:
         return f"{name} is not a readable FMU archive ({exc})"
     if bad is not None:

@@ -39,9 +39,8 @@ from impedance_cosim.cosim.ssp_archive import (
     Limits,
     SspError,
     check_archive,
-    check_members,
+    checked,
     extract,
-    open_zip,
     resolve_source,
 )
 from impedance_cosim.cosim.system import NS
@@ -98,8 +97,7 @@ def read_ssp(
 
 def _read(path: Path, folder: Path, limits: Limits, ssd: str | None) -> SystemDescription:
     where = path.name
-    with open_zip(path, where, limits, kind="an SSP archive") as archive:
-        files = check_members(archive, where, limits)
+    with checked(path, where, limits, kind="an SSP archive") as (archive, files):
         names = {f.filename for f in files}
         if SSD not in names:
             raise SspError(f"{where} has no {SSD}")

@@ -13,6 +13,7 @@ from impedance_cosim.cosim.archive import (
     Limits,
     check_archive,
     check_members,
+    checked,
     declared_members,
     extract,
     name_problem,
@@ -22,7 +23,7 @@ from impedance_cosim.cosim.archive import (
 )
 
 __all__ = ["DEFAULT_LIMITS", "ArchiveError", "Limits", "SspError", "check_archive"]
-__all__ += ["check_members", "declared_members", "extract", "open_zip", "read_member"]
+__all__ += ["check_members", "checked", "declared_members", "extract", "open_zip", "read_member"]
 __all__ += ["resolve_source", "unpack"]
 
 

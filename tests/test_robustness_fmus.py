@@ -9,7 +9,6 @@ import ctypes
 import math
 import os
 import shutil
-import signal
 import struct
 import subprocess
 import sys
@@ -397,19 +396,17 @@ def test_driver_frames_states_like_the_slave():
     assert (slave.STATE_MAGIC, slave.STATE_HEADER.format) == (STATE_MAGIC, STATE_HEADER.format)
 
 
-@pytest.mark.xfail(strict=True, reason="pythonfmu 0.7's C++ wrapper deletes the component twice")
-def test_python_fmu_double_free_is_harmless(fmu_dir):
-    """Documented limit: the second fmi2FreeInstance never reaches Python (the wrapper's
-    fmi2FreeInstance is `delete component`), so glibc aborts the process."""
-    done = run("double_free", fmu_dir / PLANT, "no")
-    assert done.returncode == 0, f"host died ({done.returncode})"
-
-
-def test_python_double_free_aborts_in_the_wrapper(fmu_dir):
-    """The limit above, pinned: SIGABRT after the second free (not a silent corruption)."""
-    done = run("double_free", fmu_dir / PLANT, "no")
-    assert done.returncode == -signal.SIGABRT, (done.returncode, done.stderr[-500:])
-    assert "freed once" in done.stdout
+@pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+def test_python_double_free_and_use_after_free_are_refused(fmu_dir, name):
+    """As the native FMUs (above): the guard in front of pythonfmu's wrapper (packaging/
+    pyfmu_guard.py) refuses a step on a freed instance and a second free; pythonfmu 0.7's
+    wrapper alone deleted the component twice and glibc aborted the process (SIGABRT).
+    FMI 3.0 and fmi2GetReal after free: tests/test_python_fmu_guard.py."""
+    done = run("double_free", fmu_dir / name)
+    assert done.returncode == 0, f"host died ({done.returncode}) {done.stderr[-500:]}"
+    assert f"step_after_free={ERROR}" in done.stdout and "freed twice" in done.stdout
+    assert "fmi2DoStep called with a freed or foreign instance: refused" in done.stderr
+    assert "fmi2FreeInstance called with a freed or foreign instance: refused" in done.stderr
 
 
 @pytest.mark.parametrize("leaked", [False, True])

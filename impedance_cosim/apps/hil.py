@@ -36,8 +36,7 @@ def replacement_problems(
 ) -> list[str]:
     """Every difference between what the system needs of `component` and the FMU file (empty
     when it fits); see module docstring."""
-    from fmpy import read_model_description
-
+    from impedance_cosim.cosim.fmu_files import FmuArchiveError, model_description
     from impedance_cosim.cosim.run_setup import connector_problems
 
     comp = system.component(component)
@@ -45,7 +44,9 @@ def replacement_problems(
     if not fmu.is_file():
         return [f"{component}: FMU {fmu} does not exist"]
     try:
-        md = read_model_description(str(fmu))
+        md = model_description(fmu)
+    except FmuArchiveError as exc:
+        return [f"{component}: {exc}"]
     except Exception as exc:
         return [f"{component}: cannot read {fmu.name}: {exc}"]
     variables = {v.name: v for v in md.modelVariables}
@@ -162,6 +163,7 @@ def _cmd_swap(args: argparse.Namespace) -> int:
         if not sep or not comp or not path:
             raise options.CliError(f"--replace expects component=path/to/file.fmu (got {item!r})")
         replace[comp.strip()] = Path(path.strip())
+    _check_archives(replace)
     overrides = options.parse_overrides(args.set or [])
     ssp = Path(args.ssp) if args.ssp else options.DEFAULT_SSP
     run.ensure_built(args, ssp)
@@ -194,10 +196,20 @@ def _cmd_swap(args: argparse.Namespace) -> int:
             stop_robot(robot)
 
 
-def _has_parameter(fmu: Path, name: str) -> bool:
-    from fmpy import read_model_description
+def _check_archives(replace: Mapping[str, Path]) -> None:
+    """Each replacement FMU that exists is a safe archive (one line naming the file and the
+    member, exit 2 otherwise), before anything is built, written or run."""
+    from impedance_cosim.cosim.fmu_files import check_fmu_archive
 
-    md = read_model_description(str(fmu))
+    for path in replace.values():
+        if path.is_file():
+            check_fmu_archive(path, str(path))  # FmuArchiveError is a ValueError: exit 2
+
+
+def _has_parameter(fmu: Path, name: str) -> bool:
+    from impedance_cosim.cosim.fmu_files import model_description
+
+    md = model_description(fmu)
     return any(v.name == name and v.causality == "parameter" for v in md.modelVariables)
 
 

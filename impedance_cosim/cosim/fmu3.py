@@ -31,6 +31,10 @@ def open_fmu(fmu: str | Path, instance_name: str, logging_on: bool = True) -> Fm
     """An instantiated co-simulation FMU of either standard (FmuInstance or FmuInstance3)."""
     from fmpy import read_model_description
 
+    from impedance_cosim.cosim.fmu_files import check_fmu_archive
+
+    if Path(fmu).is_file():
+        check_fmu_archive(Path(fmu).resolve())  # before fmpy reads a member
     try:
         md = read_model_description(str(fmu), validate=False)
     except Exception:  # FmuInstance reports an unreadable archive with its own message

@@ -1,5 +1,6 @@
-"""FMU files: an archive's integrity and binary checked, its model description read once per file
-version, and fmpy's extraction folders shared by the instances of one FMU file (fmu.py)."""
+"""FMU files: an archive checked (archive.py: the limits every archive shares) before anything
+reads it, its integrity and binary checked, its model description read once per file version,
+and the extraction folders shared by the instances of one FMU file (fmu.py)."""
 
 from __future__ import annotations
 
@@ -12,13 +13,52 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from fmpy import extract, platform, platform_tuple, read_model_description, sharedLibraryExtension
+from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
+
+from impedance_cosim.cosim.archive import (
+    DEFAULT_LIMITS,
+    ArchiveError,
+    check_archive,
+    checked,
+    unpack,
+)
 
 EXTRACT_PREFIX = "impcosim_fmu_"  # extraction folders in the temporary directory
+DESCRIPTION = "modelDescription.xml"
 
 
 class FmuError(RuntimeError):
     """An FMI call failed; the message carries the FMU's own log messages."""
+
+
+class FmuArchiveError(FmuError, ArchiveError):
+    """An FMU file is not a safe, readable archive: bad input (a ValueError too, so the commands
+    exit 2), found before anything reads or extracts a member."""
+
+
+def check_fmu_archive(fmu: Path, where: str | None = None) -> None:
+    """FmuArchiveError naming the FMU (`where`, default its file name) and the member unless the
+    archive passes the checks every archive gets (archive.check_archive: count, names, links,
+    sizes) and has a modelDescription.xml of at most the XML limit (checked once per version)."""
+    st = fmu.stat()
+    problem = _header_problem(str(fmu), st.st_mtime_ns, st.st_size, where or fmu.name)
+    if problem:
+        raise FmuArchiveError(problem)
+
+
+@lru_cache(maxsize=256)
+def _header_problem(fmu: str, _mtime_ns: int, _size: int, where: str) -> str | None:
+    try:
+        files = check_archive(Path(fmu), where, DEFAULT_LIMITS, kind="an FMU archive")
+    except ArchiveError as exc:
+        return str(exc)
+    info = next((f for f in files if f.filename == DESCRIPTION), None)
+    if info is None:
+        return f"{where} has no {DESCRIPTION}"
+    if info.file_size > DEFAULT_LIMITS.xml_bytes:
+        return (f"{where}: member {DESCRIPTION!r} unpacks to {info.file_size} bytes"
+                f" (limit {DEFAULT_LIMITS.xml_bytes})")  # fmt: skip
+    return None
 
 
 def check_fmu(fmu: Path, description: Any) -> None:
@@ -30,6 +70,7 @@ def check_fmu(fmu: Path, description: Any) -> None:
         raise FmuError(f"{fmu.name} is not a co-simulation FMU")
     folder = platform_tuple if str(description.fmiVersion).startswith("3") else platform
     binary = f"binaries/{folder}/{interface.modelIdentifier}"
+    check_fmu_archive(fmu)
     st = fmu.stat()
     problem = _archive_problem(str(fmu), st.st_mtime_ns, st.st_size, binary)
     if problem:
@@ -39,10 +80,12 @@ def check_fmu(fmu: Path, description: Any) -> None:
 @lru_cache(maxsize=256)
 def _archive_problem(fmu: str, _mtime_ns: int, _size: int, binary: str) -> str | None:
     name = Path(fmu).name
-    try:
-        with zipfile.ZipFile(fmu) as z:
+    try:  # the archive passed check_fmu_archive: testzip reads at most the sizes it allows
+        with checked(Path(fmu), name, DEFAULT_LIMITS, kind="an FMU archive") as (z, files):
             bad = z.testzip()
-            names = set(z.namelist())
+            names = {f.filename for f in files}
+    except ArchiveError as exc:
+        return str(exc)
     except (zipfile.BadZipFile, OSError, EOFError, RuntimeError) as exc:
         return f"{name} is not a readable FMU archive ({exc})"
     if bad is not None:
@@ -59,8 +102,9 @@ def _archive_problem(fmu: str, _mtime_ns: int, _size: int, binary: str) -> str |
 
 
 def model_description(fmu: Path) -> Any:
-    """fmpy's model description of an FMU file, read once per file version (parsing costs ~5 ms:
-    a sweep's runs share it; treat it as read-only)."""
+    """fmpy's model description of an FMU file, read once per file version after the archive
+    checks (parsing costs ~5 ms: a sweep's runs share it; treat it as read-only)."""
+    check_fmu_archive(fmu)
     st = fmu.stat()
     return _description(str(fmu), st.st_mtime_ns, st.st_size)
 
@@ -81,23 +125,29 @@ class Extractions:
         self._entries: dict[tuple, list] = {}  # (path, mtime_ns, size) -> [description, dir, users]
 
     def acquire(self, fmu: Path) -> tuple[tuple, Any, str]:
+        """(key for release, model description, extraction folder) of an FMU file, checked and
+        extracted on first use (FmuArchiveError for an unsafe archive, FmuError otherwise)."""
         st = fmu.stat()
         key = (fmu, st.st_mtime_ns, st.st_size)
         with self._lock:
             self._prune()
             entry = self._entries.get(key)
             if entry is None:
+                check_fmu_archive(fmu)
                 try:
                     description = read_model_description(str(fmu))
                 except Exception as exc:  # fmpy raises bare Exceptions
                     raise FmuError(f"{fmu.name}: invalid modelDescription.xml ({exc})") from None
                 check_fmu(fmu, description)
                 folder = tempfile.mkdtemp(prefix=EXTRACT_PREFIX)
-                try:
-                    extract(str(fmu), folder)
-                except Exception as exc:
+                try:  # the bytes unpacked are counted against the limits again
+                    unpack(fmu, Path(folder), fmu.name, DEFAULT_LIMITS, kind="an FMU archive")
+                except ArchiveError as exc:
                     shutil.rmtree(folder, ignore_errors=True)
-                    raise FmuError(f"{fmu.name} cannot be extracted ({exc})") from None
+                    raise FmuArchiveError(str(exc)) from None
+                except BaseException:
+                    shutil.rmtree(folder, ignore_errors=True)
+                    raise
                 entry = self._entries[key] = [description, folder, 0]
             entry[2] += 1
             return key, entry[0], entry[1]

@@ -40,14 +40,15 @@ def cs_crossing_times(
     """Step the co-simulation plant with the held torques; return the times where `output`
     crosses `level` (bisected to 1e-12 s by restoring the FMU state: the plant's result does not
     depend on the step size) and the joint angles q1_true..q3_true at every t_i."""
-    from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
-    md = read_model_description(str(fmu))
+    from impedance_cosim.cosim.fmu_files import extractions
+
+    _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
     vr = {v.name: v.valueReference for v in md.modelVariables}
     cs = FMU2Slave(
         guid=md.guid,
-        unzipDirectory=extract(str(fmu)),
+        unzipDirectory=unzip,
         modelIdentifier=md.coSimulation.modelIdentifier,
         instanceName="replay",
     )
@@ -93,14 +94,16 @@ def me_replay(
     solver step and event (state events are the rows off the t grid)."""
     import ctypes
 
-    from fmpy import extract, read_model_description, simulate_fmu
+    from fmpy import simulate_fmu
     from fmpy.fmi2 import FMU2Model
 
-    md = read_model_description(str(fmu))
+    from impedance_cosim.cosim.fmu_files import extractions
+
+    _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
     nx, nz = len(md.derivatives), md.numberOfEventIndicators
     model = FMU2Model(
         guid=md.guid,
-        unzipDirectory=extract(str(fmu)),
+        unzipDirectory=unzip,
         modelIdentifier=md.modelExchange.modelIdentifier,
         instanceName="replay",
     )

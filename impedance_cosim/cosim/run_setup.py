@@ -11,7 +11,7 @@ from typing import Any
 
 from impedance_cosim.cosim.fmu import fmi_value
 from impedance_cosim.cosim.fmu3 import ssp_type
-from impedance_cosim.cosim.fmu_files import FmuError, check_fmu, model_description
+from impedance_cosim.cosim.fmu_files import FmuArchiveError, FmuError, check_fmu, model_description
 from impedance_cosim.cosim.ssp import SystemDescription
 from impedance_cosim.fmi.variables import ENUMERATIONS
 
@@ -85,6 +85,8 @@ def read_descriptions(fmu_files: Mapping[str, Path]) -> dict[str, Any]:
             raise MasterError(f"component {name}: FMU {path} does not exist")
         try:
             descriptions[name] = model_description(path)
+        except FmuArchiveError as exc:  # names the FMU file and the member
+            raise MasterError(f"component {name}: {exc}") from None
         except Exception as exc:
             raise MasterError(f"component {name}: cannot read {path.name}: {exc}") from None
         try:

@@ -5,7 +5,8 @@ connections, parameter bindings with .ssv parameter sets (on the system or on co
 default experiment, and this project's master annotation (step size, algorithm, order); and SSP
 variants: further .ssd files at the archive's root, each read as the same system with the
 parameter set(s) it binds (the scenarios).
-The archive is treated as hostile: see ssp_archive (member checks, caps, safe `source` URIs).
+The archive is treated as hostile: see archive.py (member checks, caps: the same for the FMUs in
+it) and ssp_archive (safe `source` URIs).
 Every problem found is an SspError naming the file and element; nothing else escapes.
 """
 
@@ -34,12 +35,12 @@ from impedance_cosim.cosim.ssd import (
 )
 from impedance_cosim.cosim.ssp_archive import (
     DEFAULT_LIMITS,
+    ArchiveError,
     Limits,
     SspError,
-    check_members,
-    declared_members,
+    check_archive,
+    checked,
     extract,
-    open_zip,
     resolve_source,
 )
 from impedance_cosim.cosim.system import NS
@@ -79,6 +80,12 @@ def read_ssp(
         raise SspError(f"cannot make a folder to extract {path.name} into: {exc}") from None
     try:
         desc = _read(path, folder, limits, ssd)
+    except ArchiveError as exc:  # the shared checks (archive.py): an SspError for the reader
+        if extract_to is None:
+            shutil.rmtree(folder, ignore_errors=True)
+        if isinstance(exc, SspError):
+            raise
+        raise SspError(str(exc)) from None
     except BaseException:
         if extract_to is None:
             shutil.rmtree(folder, ignore_errors=True)
@@ -90,8 +97,7 @@ def read_ssp(
 
 def _read(path: Path, folder: Path, limits: Limits, ssd: str | None) -> SystemDescription:
     where = path.name
-    with open_zip(path, where, limits) as archive:
-        files = check_members(archive, where, limits)
+    with checked(path, where, limits, kind="an SSP archive") as (archive, files):
         names = {f.filename for f in files}
         if SSD not in names:
             raise SspError(f"{where} has no {SSD}")
@@ -180,16 +186,8 @@ def _system(src: Source, ssd: str, folder: Path) -> SystemDescription:
 
 
 def _check_fmu(fmu: Path, where: str, limits: Limits) -> None:
-    """An FMU that is a zip is checked like the archive (fmpy extracts it later); anything else
-    is left to the FMU loader, which says what is wrong with it."""
-    if not zipfile.is_zipfile(fmu):
-        return
-    count = declared_members(fmu)
-    if count is not None and count > limits.members:
-        raise SspError(f"{where} has {count} members (limit {limits.members})")
-    try:
-        archive = zipfile.ZipFile(fmu)
-    except Exception:  # a damaged FMU is reported by the FMU loader
-        return
-    with archive:
-        check_members(archive, where, limits)
+    """An FMU that is a zip is checked like the archive, by the same function and limits (it is
+    extracted later by fmu_files, which checks it again); anything else is left to the FMU
+    loader, which says what is wrong with it."""
+    if zipfile.is_zipfile(fmu):
+        check_archive(fmu, where, limits, kind="an FMU archive")

@@ -17,6 +17,7 @@ import impedance_cosim
 from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.packaging import toolchains
 from impedance_cosim.packaging.isolate import content_tag, isolate
+from impedance_cosim.packaging.pyfmu_guard import guard_binaries
 from impedance_cosim.util.atomic import temp_path
 
 REPO = Path(impedance_cosim.__file__).resolve().parent.parent
@@ -121,11 +122,13 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
     of the interface and the bundled code, so identical sources give an identical FMU."""
     cls = spec.load_model_class()
     with zipfile.ZipFile(raw) as zin:
-        members = sorted(n for n in zin.namelist() if n != "modelDescription.xml")
+        contents = {n: zin.read(n) for n in zin.namelist() if n != "modelDescription.xml"}
+        contents = guard_binaries(contents, 2)  # pyfmu_guard.py: refuses calls after free
+        members = sorted(contents)
         digest = hashlib.sha256()
         for name in members:
             digest.update(name.encode())
-            digest.update(zin.read(name))
+            digest.update(contents[name])
 
         def xml(guid: str) -> bytes:
             return _model_description(cls, guid, "pythonfmu")
@@ -139,7 +142,7 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
                 info.compress_type = zipfile.ZIP_DEFLATED
                 info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
                 if name != "modelDescription.xml":
-                    zout.writestr(info, zin.read(name))
+                    zout.writestr(info, contents[name])
                 else:
                     zout.writestr(info, xml(guid))
             _add_documentation(zout, xml(guid), "pythonfmu")

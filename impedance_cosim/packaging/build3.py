@@ -35,6 +35,7 @@ from impedance_cosim.packaging.build import (
     pack_native_fmu,
 )
 from impedance_cosim.packaging.isolate import content_tag, isolate
+from impedance_cosim.packaging.pyfmu_guard import guard_binaries
 from impedance_cosim.util.atomic import temp_path
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
@@ -131,7 +132,8 @@ def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "pyt
         raw = FmuBuilder.build_FMU(slave, dest=Path(tmp) / "raw", project_files=project)
         with zipfile.ZipFile(raw) as zin:
             members = sorted(n for n in zin.namelist() if n != "modelDescription.xml")
-            contents = {n: zin.read(n) for n in members}
+            contents = guard_binaries({n: zin.read(n) for n in members}, 3)  # pyfmu_guard.py
+            members = sorted(contents)
     digest = hashlib.sha256(_xml_python(cls, ""))
     for name in members:
         digest.update(name.encode() + contents[name])

@@ -517,4 +517,5 @@ def test_local_workers_hold_no_lock_of_ours_and_leave_signals_to_us(tmp_path):
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert not [f for f in files if f.endswith((LOCK_NAME, "sweep.csv.lock"))], files
+    assert str(tmp_path) not in files, files  # the folder lock is the folder's own descriptor
     assert sigint == str(signal.SIG_IGN) and sigterm == str(signal.SIG_DFL)

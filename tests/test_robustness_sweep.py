@@ -478,7 +478,7 @@ def test_out_naming_a_file_is_one_line(native_ssp, tmp_path, capsys):
     assert "is a file, not a folder" in err and err.count("\n") == 1
     assert main([*args, str(tmp_path / "f" / "sub")]) == 2  # a folder that cannot be made
     err = capsys.readouterr().err
-    assert f"cannot write the table in {tmp_path / 'f'}" in err and err.count("\n") == 1
+    assert f"is a file, not a folder ({tmp_path / 'f'})" in err and err.count("\n") == 1
 
 
 def _worker_view() -> tuple[list[str], str, str]:

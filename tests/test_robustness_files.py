@@ -169,6 +169,28 @@ def test_an_appended_table_is_cut_back_to_its_last_whole_line(tmp_path):
     assert all(len(ln.split(",")) == 3 for ln in text.splitlines())
 
 
+def test_a_sweep_table_on_a_full_disk_holds_whole_rows_and_says_so(native_ssp, tmp_path):
+    """sweep.csv is appended as runs finish: on a full disk (16 kB tmpfs) it ends in a whole
+    row, the line names it, its folder and how many rows it holds; exit status 1."""
+    import csv
+
+    with tmpfs(tmp_path / "full", "size=16k") as full:
+        out = full / "s"
+        done = cli("sweep", "--ssp", str(native_ssp), "--serial", "--no-progress", "--grid",
+                   "controller.K=lin:50:100:200", "--stop", "0.01", "--out", str(out),
+                   cwd=tmp_path)  # fmt: skip
+        assert done.returncode == 1, done.stderr
+        (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
+        found = re.search(rf"cannot write sweep.csv in {out}: No space left on device; it holds"
+                          r" the (\d+) rows before this one, whole$", line)  # fmt: skip
+        assert found, line
+        text = (out / "sweep.csv").read_text()
+        rows = list(csv.reader(text.splitlines()))
+        assert text.endswith("\n") and len({len(r) for r in rows}) == 1
+        assert len(rows) - 1 == int(found[1]) > 0
+        assert not list(out.glob(".*.tmp*"))
+
+
 # --- one folder, one command at a time ----------------------------------------------------------
 
 

@@ -191,6 +191,27 @@ def test_a_sweep_table_on_a_full_disk_holds_whole_rows_and_says_so(native_ssp, t
         assert not list(out.glob(".*.tmp*"))
 
 
+def test_a_stability_log_on_a_full_disk_keeps_its_runs_for_resume(native_ssp, tmp_path):
+    """The stability study's run log on a full disk (8 kB tmpfs): one line naming it and how
+    many finished runs it holds, each line whole; with space again, --resume uses them."""
+    args = ["stability", "boundaries", "--quantity", "rate", "--serial", "--no-progress", "--stop",
+            "1", "--no-figures", "--ssp", str(native_ssp), "--out"]  # fmt: skip
+    with tmpfs(tmp_path / "full", "size=8k") as full:
+        out = full / "s"
+        done = cli(*args, str(out), cwd=tmp_path)
+        assert done.returncode == 1, done.stderr
+        (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
+        found = re.search(rf"cannot write boundaries.runs.jsonl in {out}: No space left on"
+                          r" device; it holds the (\d+) finished runs before", line)  # fmt: skip
+        assert found and int(found[1]) > 0, line
+        text = (out / "boundaries.runs.jsonl").read_text()
+        assert text.endswith("\n") and len(text.splitlines()) == int(found[1]) + 1  # + its plan
+        subprocess.run(["mount", "-o", "remount,size=8m", str(full)], check=True)
+        done = cli(*args, str(out), "--resume", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        assert f"{found[1]} kept from an earlier run" in done.stdout, done.stdout
+
+
 # --- one folder, one command at a time ----------------------------------------------------------
 
 

@@ -110,6 +110,21 @@ def test_a_file_size_limit_is_a_full_disk_without_a_mount(native_ssp, tmp_path):
     assert (out / "report.html").is_file()
 
 
+def test_a_figure_that_does_not_fit_is_named_and_not_left_half_written(native_ssp, tmp_path):
+    """The CSV fits on a 64 kB tmpfs, Fig. 1 does not: the line names the figure (not its
+    temporary name, even through nested temporary files) and its folder; no half figure."""
+    with tmpfs(tmp_path / "full", "size=64k") as full:
+        out = full / "a"
+        done = cli("run", "--ssp", str(native_ssp), "--stop", "0.1", "--out", str(out),
+                   "--no-progress", cwd=tmp_path)  # fmt: skip
+        assert done.returncode == 1, done.stderr
+        (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
+        assert line.endswith(f"cannot write fig1_position_force.png in {out}: No space left on"
+                             " device"), line  # fmt: skip
+        assert whole_csv(out / "observer.csv") == 41
+        assert not list(out.glob("*.png")) and not list(out.glob(".*"))
+
+
 _TO_CSV = """
 import sys
 import numpy as np

@@ -62,8 +62,9 @@ class WriteError(OSError):
 
 def write_error(target: str | Path, exc: OSError, note: str = "") -> WriteError:
     """exc (raised while writing target, maybe through a temporary file) as a WriteError."""
-    if isinstance(exc, WriteError):
-        return exc
+    if isinstance(exc, WriteError):  # about our temporary file (nested writes): name target
+        ours = exc.target.name.startswith(f".{Path(target).name}.")
+        return WriteError(target, exc.reason, exc.note, exc.errno) if ours else exc
     reason = exc.strerror or str(exc)
     other = exc.filename and not Path(str(exc.filename)).name.startswith(f".{Path(target).name}.")
     if other:  # another file than ours (e.g. a font a figure needs): say which

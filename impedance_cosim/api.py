@@ -112,11 +112,16 @@ class Result:
         return df
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write the signals as the CLI's CSV (fmpy.util.read_csv reads it); returns the path."""
+        """Write the signals as the CLI's CSV (fmpy.util.read_csv reads it); returns the path.
+        The file is whole or not there: WriteError (an OSError) naming path when it cannot be."""
         from impedance_cosim.cosim.results import write_csv
+        from impedance_cosim.util.atomic import WriteError
 
         path = Path(path)
-        write_csv(path, self.names, self.data)
+        try:
+            write_csv(path, self.names, self.data)
+        except WriteError as exc:  # one line naming path and its folder; nothing left there
+            raise exc.with_note("the rows are still in this Result") from None
         return path
 
     def figure_1(self, path: str | Path | None = None) -> Figure:

@@ -182,13 +182,14 @@ def test_a_failed_run_writes_a_report_saying_so(ssp_path, tmp_path):
     assert page.row("start pose")[3] == "(5.0 m, 0.0 m) (NOT the paper)"
 
 
-def test_an_error_before_any_run_is_reported(ssp_path, tmp_path):
+def test_an_error_before_any_run_writes_no_report(ssp_path, tmp_path, capsys):
+    """Bad input is one line and writes nothing, not even the folder (issue 20)."""
     out = tmp_path / "bad"
     argv = ["run", "--ssp", str(ssp_path), "--stop", "0.5", "--set", "controller.nosuch=1",
             "--out", str(out), "--no-progress"]  # fmt: skip
     assert main(argv) == 2
-    text = " ".join(check_page(out / "report.html").text)
-    assert "FAILED: unknown parameter controller.nosuch given with --set" in text
+    assert "unknown parameter controller.nosuch given with --set" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_figures_of_an_earlier_run_are_not_shown(ssp_path, tmp_path):

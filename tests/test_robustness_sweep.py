@@ -478,7 +478,7 @@ def test_out_naming_a_file_is_one_line(native_ssp, tmp_path, capsys):
     assert "is a file, not a folder" in err and err.count("\n") == 1
     assert main([*args, str(tmp_path / "f" / "sub")]) == 2  # a folder that cannot be made
     err = capsys.readouterr().err
-    assert f"cannot write the table in {tmp_path / 'f'}" in err and err.count("\n") == 1
+    assert f"is a file, not a folder ({tmp_path / 'f'})" in err and err.count("\n") == 1
 
 
 def _worker_view() -> tuple[list[str], str, str]:
@@ -517,4 +517,5 @@ def test_local_workers_hold_no_lock_of_ours_and_leave_signals_to_us(tmp_path):
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert not [f for f in files if f.endswith((LOCK_NAME, "sweep.csv.lock"))], files
+    assert str(tmp_path) not in files, files  # the folder lock is the folder's own descriptor
     assert sigint == str(signal.SIG_IGN) and sigterm == str(signal.SIG_DFL)

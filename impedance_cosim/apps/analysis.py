@@ -145,8 +145,11 @@ def _axes(rows: int, cols: int, title: str):
 
 def _finish(fig: Figure, path: Path | None) -> Figure:
     """Save the figure to path (when given) and return it (a notebook shows it)."""
-    if path is not None:
-        fig.savefig(path, dpi=110)
+    if path is not None:  # whole or not there; a failure names path (util.atomic)
+        from impedance_cosim.util.atomic import atomic_path
+
+        with atomic_path(path, suffix=".tmp" + Path(path).suffix) as tmp:
+            fig.savefig(tmp, dpi=110)
     return fig
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import tempfile
 from pathlib import Path
 
@@ -37,16 +38,72 @@ def finite_positive(text: str) -> float:
     return value
 
 
-def prepare_out(folder: Path) -> Path:
-    """The output folder, created if needed and checked writable (before any simulation)."""
-    if folder.exists() and not folder.is_dir():
-        raise CliError(f"--out {folder} is a file, not a folder")
+def _shown(text: str) -> str:
+    return text if len(text) <= 80 else f"{text[:60]}... ({len(text)} characters)"
+
+
+def check_out(text: str | Path, option: str = "--out") -> Path:
+    """The output folder named on the command line, checked without creating anything: not
+    empty, not a file, names the file system allows, in a place that can be written."""
+    text = str(text)
+    if not text.strip():
+        raise CliError(f"{option} is empty: give the folder to write into")
+    folder = Path(text)
+    try:
+        here = folder.absolute()
+        there = next(p for p in (here, *here.parents) if _exists(p))  # the part that exists
+        limit = _name_max(there if there.is_dir() else there.parent)
+        for part in here.relative_to(there).parts:
+            size = len(os.fsencode(part))
+            if size > limit:
+                raise CliError(f"{option} {_shown(text)}: a name of {size} bytes, longer than"
+                               f" the file system allows ({limit})")  # fmt: skip
+        if not there.is_dir():
+            where = "" if there == here else f" ({there})"
+            raise CliError(f"{option} {_shown(text)} is a file, not a folder{where}")
+        if not os.access(there, os.W_OK | os.X_OK):
+            why = "read-only file system" if _read_only(there) else "no permission to write"
+            where = "" if there == here else f" in {there}"
+            raise CliError(f"{option} {_shown(text)} is not a writable folder ({why}{where})")
+    except OSError as exc:
+        raise CliError(f"{option} {_shown(text)} cannot be used ({exc.strerror or exc})") from None
+    return folder
+
+
+def _name_max(folder: Path) -> int:
+    """The longest file name the file system of folder allows (255 where it cannot say)."""
+    try:
+        return os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, AttributeError, ValueError):  # no pathconf on Windows
+        return 255
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError:  # e.g. a name too long
+        return False
+
+
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
+
+
+def prepare_out(folder: Path, option: str = "--out") -> Path:
+    """The output folder (see check_out), created if needed and checked writable (before any
+    simulation)."""
+    folder = check_out(folder, option)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as exc:
-        raise CliError(f"--out {folder} is not a writable folder ({exc.strerror or exc})") from None
+        raise CliError(
+            f"{option} {_shown(str(folder))} is not a writable folder ({exc.strerror or exc})"
+        ) from None
     return folder
 
 

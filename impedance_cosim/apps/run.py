@@ -11,15 +11,26 @@ import sys
 import time
 from pathlib import Path
 
-from impedance_cosim.apps.options import DEFAULT_SSP, REPO, parse_overrides, prepare_out
+from impedance_cosim.apps.options import (
+    DEFAULT_SSP,
+    REPO,
+    check_out,
+    parse_overrides,
+    prepare_out,
+)
 from impedance_cosim.cosim import provenance
+
+BUILD_WAIT_S = 900.0  # how long a build waits for another one into the same folder
 
 
 def cmd_build(args: argparse.Namespace) -> int:
     from impedance_cosim.packaging.build_all import build_all
+    from impedance_cosim.util.atomic import FolderLock
 
-    for path in build_all(prepare_out(Path(args.out)), args.only or None):
-        print(f"built {path}")
+    out = prepare_out(check_out(args.out))
+    with FolderLock(out, "build folder", wait=BUILD_WAIT_S):  # one build at a time
+        for path in build_all(out, args.only or None):
+            print(f"built {path}")
     return 0
 
 
@@ -42,46 +53,63 @@ def stale(target: Path) -> bool:
 def ensure_built(args: argparse.Namespace, ssp: Path) -> None:
     """Build the default system archive (and its FMUs) when no --ssp was given and it is stale."""
     if not args.ssp and stale(ssp):
-        print("building the FMUs and the system archive ...", file=sys.stderr)
-        cmd_build(argparse.Namespace(out=str(ssp.parent), only=None))
+        from impedance_cosim.util.atomic import FolderLock
+
+        with FolderLock(prepare_out(ssp.parent), "build folder", wait=BUILD_WAIT_S):
+            if stale(ssp):  # not built meanwhile by another process
+                print("building the FMUs and the system archive ...", file=sys.stderr)
+                cmd_build(argparse.Namespace(out=str(ssp.parent), only=None))
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    """Check everything (options, archive, every scenario to run), then create --out, lock it
+    and run: bad input writes nothing."""
+    from impedance_cosim.cosim.ssp import read_ssp
     from impedance_cosim.util.atomic import FolderLock
 
     overrides = parse_overrides(args.set or [])
-    out = prepare_out(Path(args.out))
+    out = check_out(args.out)
     ssp = Path(args.ssp) if args.ssp else DEFAULT_SSP
-    with FolderLock(out, "--out"):
-        ensure_built(args, ssp)
+    ensure_built(args, ssp)
+    system = args.system = read_ssp(ssp)  # closed by _dispatch()
+    pair = [] if args.no_figures else ["observer", "difference"]
+    for scenario in [args.scenario, *(s for s in pair if s in system.parameter_sets)]:
+        _master(args, system, overrides, scenario)
+    with FolderLock(prepare_out(out), "--out"):
         return _run_scenarios(args, ssp, overrides, out)
+
+
+def _master(args: argparse.Namespace, system, overrides: dict, scenario: str | None):
+    """The master of one run of the command (MasterError for anything it refuses)."""
+    from impedance_cosim.cosim.master import Master
+    from impedance_cosim.cosim.realtime import realtime_setting
+
+    return Master(
+        system,
+        parameter_set=scenario,
+        overrides=overrides,
+        algorithm=args.algorithm,
+        step_size=args.step,
+        stop_time=args.stop,
+        fmu_files=getattr(args, "fmu_files", None),
+        realtime=realtime_setting(args),
+    )
 
 
 def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Path) -> int:
     """The chosen scenario (CSV as it runs, summary, figures) and, for Fig. 4, its pair; 1 when
     any of them failed."""
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.realtime import realtime_setting
     from impedance_cosim.cosim.results import CsvStream
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.util.atomic import WriteError
     from impedance_cosim.util.interrupt import RunInterrupted
 
-    system = args.system = read_ssp(ssp)  # closed by _dispatch()
+    system = args.system
     progress = not args.no_progress  # a bar on a terminal, plain periodic lines otherwise
     runs: list[dict] = []  # provenance of each run, written to run.json on every exit path
     started, t0 = provenance.now_utc(), time.perf_counter()
 
     def run(scenario: str | None):
-        master = Master(
-            system,
-            parameter_set=scenario,
-            overrides=overrides,
-            algorithm=args.algorithm,
-            step_size=args.step,
-            stop_time=args.stop,
-            fmu_files=getattr(args, "fmu_files", None),
-            realtime=realtime_setting(args),
-        )
+        master = _master(args, system, overrides, scenario)
         path = out / f"{master.parameter_set or 'run'}.csv"
         stderr, fmu_output = sys.stderr, io.StringIO()
         with CsvStream(path) as csv, contextlib.redirect_stderr(fmu_output):
@@ -91,6 +119,10 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                 exc.message += f"; {csv.rows} rows kept in {path}"
                 entry = provenance.run_entry(master, None, overrides, path, "interrupted")
                 runs.append({**entry, "rows": csv.rows, "error": exc.message})
+                raise
+            except WriteError as exc:  # e.g. a full disk: what it kept is in the message
+                entry = provenance.run_entry(master, None, overrides, path, "failed")
+                runs.append({**entry, "rows": csv.rows, "error": str(exc)})
                 raise
             finally:
                 echo_fmu_output(fmu_output.getvalue(), stderr)
@@ -168,13 +200,8 @@ def _figure(draw, path: Path, *runs) -> Path:
     """draw(*runs, path) through a temporary file renamed into place (a figure is whole or old)."""
     from impedance_cosim.util import atomic
 
-    tmp = atomic.temp_path(path, suffix=".tmp" + path.suffix)  # the suffix picks the format
-    try:
+    with atomic.atomic_path(path, suffix=".tmp" + path.suffix) as tmp:  # the suffix: the format
         draw(*runs, tmp)
-    except BaseException:
-        atomic.discard(tmp)
-        raise
-    atomic.replace(tmp, path)
     return path
 
 

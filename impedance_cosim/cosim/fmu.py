@@ -7,6 +7,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import ctypes
+import math
 import os
 import sys
 from collections.abc import Iterable, Mapping
@@ -270,7 +271,12 @@ def fmi_value(kind: str, value: Any, name: str) -> Any:
     kind = {"Float64": "Real", "Int32": "Integer"}.get(kind, kind)  # FMI 3.0 names
     try:
         if kind == "Real":
-            return float(value)
+            number = float(value)
+            if math.isinf(number) and "inf" not in str(value).lower():  # e.g. 400 digits
+                most = sys.float_info.max
+                raise ValueError(f"variable {name}: {_shown(value)} is out of range (a 64-bit"
+                                 f" float is at most {most:.4g} in magnitude)")  # fmt: skip
+            return number
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, float) and not value.is_integer():
                 raise ValueError(value)
@@ -290,4 +296,10 @@ def fmi_value(kind: str, value: Any, name: str) -> Any:
     except (TypeError, ValueError, OverflowError) as exc:
         if str(exc).startswith("variable "):
             raise
-        raise ValueError(f"variable {name}: {value!r} is not a valid {kind}") from None
+        raise ValueError(f"variable {name}: {_shown(value)} is not a valid {kind}") from None
+
+
+def _shown(value: Any) -> str:
+    """A value as a message shows it: its repr, shortened when long (5000 digits)."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(str(value))} characters)"

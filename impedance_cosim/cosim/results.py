@@ -2,9 +2,11 @@
 on disk.
 
 Results CSV written as a run goes: rows are appended to a temporary file beside the target
-and flushed after every block; closing the stream (also on an exception or an interruption)
+and written out after every block; closing the stream (also on an exception or an interruption)
 renames it into place, so the CSV at the target name is always whole, and holds every row
-computed before the run stopped.
+computed before the run stopped. A write that fails (a full disk) leaves no file at the target
+name: the rows that fit, cut back to the last whole row, are renamed to `<target>.partial`, and
+the WriteError's one line names the target, its folder and that file.
 
 Format: a header of names ("time" first), then one row per line, each value the shortest text
 that reads back to the same double (Python's repr). fmpy.util.read_csv reads it."""
@@ -85,37 +87,80 @@ def format_rows(data: np.ndarray) -> str:
 
 class CsvStream:
     """A results CSV appended block by block (see module docstring). Use as a context manager;
-    `write(names, rows)` is the sink the master calls."""
+    `write(names, rows)` is the sink the master calls. keep_partial=False: on a failed write
+    nothing is kept (for a table whose rows are still in memory, e.g. Result.to_csv)."""
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Path, keep_partial: bool = True) -> None:
+        self.path, self.keep_partial = Path(path), keep_partial
         self.names: list[str] | None = None
         self.rows = 0
-        self._tmp = atomic.temp_path(self.path)
-        self._file = open(self._tmp, "w", newline="")  # noqa: SIM115 (closed in close())
+        self._last: float | None = None  # the time of the last row written
+        try:
+            self._tmp: Path | None = atomic.temp_path(self.path)
+        except OSError as exc:
+            raise atomic.write_error(self.path, exc) from None
+        try:
+            self._file: atomic.LineFile | None = atomic.LineFile(self._tmp, self.path)
+        except OSError:
+            atomic.discard(self._tmp)
+            raise
 
     def write(self, names: list[str], rows: np.ndarray) -> None:
-        """Append rows (an array with one column per name); the first call writes the header."""
-        if self.names is None:
+        """Append rows (an array with one column per name); the first call writes the header.
+        After a failed write (WriteError), later calls do nothing."""
+        if self._file is None:
+            return
+        text, header = "", self.names is None
+        if header:
             self.names = list(names)
-            self._file.write(",".join(_quote(n) for n in self.names) + "\n")
+            text = ",".join(_quote(n) for n in self.names) + "\n"
         elif list(names) != self.names:
             raise ValueError(f"{self.path.name}: columns changed during the run")
         if len(rows):
-            self._file.write(format_rows(np.asarray(rows, dtype=float)))
+            text += format_rows(np.asarray(rows, dtype=float))
+        try:
+            self._file.append(text)
+        except atomic.WriteError as exc:
+            raise self._failed(exc, header) from None
+        if len(rows):
             self.rows += len(rows)
-        self._file.flush()
+            self._last = float(rows[-1][0])
+
+    def _failed(self, exc: atomic.WriteError, header: bool) -> atomic.WriteError:
+        """After a failed write: the rows that fit to <target>.partial (or nothing), the error
+        saying where they are."""
+        assert self._file is not None and self._tmp is not None
+        lines = self._file.kept_text.splitlines()[1 if header else 0 :]
+        self._file.close()
+        self._file, tmp, self._tmp = None, self._tmp, None
+        rows = self.rows + len(lines)
+        last = float(lines[-1].partition(",")[0]) if lines else self._last
+        if not self.keep_partial or not rows:
+            atomic.discard(tmp)
+            return exc
+        partial = self.path.with_name(self.path.name + ".partial")
+        try:
+            atomic.replace(tmp, partial)
+        except OSError:
+            atomic.keep(tmp)
+            partial = tmp
+        note = f"the {rows} whole rows that fit (to t={last:.9g} s) are in {partial}"
+        return exc.with_note(note)
 
     def close(self) -> None:
         """Rename the rows written so far into place (nothing at all if no header was written)."""
-        if self._file is None:
+        if self._file is None or self._tmp is None:
             return
         self._file.close()
-        self._file = None
+        self._file, tmp, self._tmp = None, self._tmp, None
         if self.names is None:
-            atomic.discard(self._tmp)
-        else:
-            atomic.replace(self._tmp, self.path)
+            atomic.discard(tmp)
+            return
+        try:
+            atomic.replace(tmp, self.path)
+        except OSError as exc:
+            atomic.discard(tmp)
+            raise atomic.write_error(self.path, exc) from None
 
     def __enter__(self) -> CsvStream:
         return self
@@ -125,8 +170,9 @@ class CsvStream:
 
 
 def write_csv(path: str | Path, names: list[str], data: np.ndarray) -> None:
-    """A whole results table at once, through a temporary file renamed into place."""
-    with CsvStream(path) as stream:
+    """A whole results table at once, through a temporary file renamed into place; nothing at
+    path when it cannot be written (a WriteError naming path)."""
+    with CsvStream(path, keep_partial=False) as stream:
         stream.write(names, data)
 
 

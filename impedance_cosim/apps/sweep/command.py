@@ -176,9 +176,9 @@ def _check_options(args: argparse.Namespace) -> None:
                 f"unknown metric {metric!r} (have {', '.join(METRICS)})"
                 + (f"; did you mean {', '.join(close)}?" if close else "")
             )
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out} is a file, not a folder")
+    from impedance_cosim.apps.options import check_out
+
+    check_out(args.out)  # empty, a file, too long a name, read-only: one line, nothing written
     runs = 1
     for item in args.grid:
         _name, values = parse_axis(item, max_count=MAX_RUNS)  # before the archive is read or built
@@ -202,9 +202,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     _check_options(args)
     tables: list = []  # the tables opened so far (for the line on an interruption)
     started, t0 = provenance.now_utc(), time.perf_counter()
-    with stop_on_signals():
+    with stop_on_signals(), contextlib.ExitStack() as held:
         try:
-            return _sweep(args, tables)
+            return _sweep(args, tables, held)
         except RunsLostError as exc:
             print(f"impedance-cosim sweep: error: {exc}; {_kept(tables)}", file=sys.stderr)
             return 1
@@ -249,7 +249,16 @@ def _write_provenance(args: argparse.Namespace, table, started: str, wall: float
               file=sys.stderr)  # fmt: skip
 
 
-def _sweep(args: argparse.Namespace, tables: list) -> int:
+def _lock_out(out: Path, held: contextlib.ExitStack) -> None:
+    """--out created and locked (the lock every command writing a folder takes) until the
+    command ends, after every check."""
+    from impedance_cosim.apps.options import prepare_out
+    from impedance_cosim.util.atomic import FolderLock
+
+    held.enter_context(FolderLock(prepare_out(out), "--out"))
+
+
+def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -> int:
     if args.scheduler:  # before anything else: fail fast
         from impedance_cosim.apps.sweep.cluster import check_scheduler
 
@@ -276,6 +285,7 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
         names = args.study or list(STUDY)
         ssp = ssp or default_ssp()
         started = time.perf_counter()
+        _lock_out(out, held)
         written = run_study(names, out, ssp, factory, progress, args.stop, args.resume, tables)
         print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
         for path in written:
@@ -298,6 +308,7 @@ def _sweep(args: argparse.Namespace, tables: list) -> int:
     )
     path = out / "sweep.csv"
     started = time.perf_counter()
+    _lock_out(out, held)
     with open_table(path, plan, args.resume) as table:
         tables.append(table)
         kept = len(table.done)

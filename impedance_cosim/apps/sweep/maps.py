@@ -3,8 +3,6 @@ runs that did not stay bounded marked (PNG files, written through a temporary na
 
 from __future__ import annotations
 
-import contextlib
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,14 +22,11 @@ DEFAULT_PLOTS = (
 
 def save_figure(fig: Any, path: Path, **kwargs: Any) -> None:
     """fig.savefig to a temporary name beside path, then renamed into place."""
+    from impedance_cosim.util.atomic import atomic_path
+
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
+    with atomic_path(path, suffix=".tmp" + path.suffix) as tmp:  # a failure names path
         fig.savefig(tmp, **kwargs)
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
 
 
 def _short(name: str) -> str:

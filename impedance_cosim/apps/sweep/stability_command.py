@@ -95,8 +95,9 @@ def _check(args: argparse.Namespace) -> Path:
         raise st.StabilityError(  # so that every whole-Hz rate divides the run
             f"--stop must be a whole number of seconds >= 1 (got {args.stop})"
         )
-    if Path(args.out).exists() and not Path(args.out).is_dir():
-        raise st.StabilityError(f"--out {args.out} is a file, not a folder")
+    from impedance_cosim.apps.options import check_out
+
+    check_out(args.out)  # empty, a file, too long a name, read-only: one line, nothing written
     ssp = Path(args.ssp) if args.ssp else default_ssp()
     if not ssp.is_file():
         raise FileNotFoundError(f"no system archive {ssp}")
@@ -217,14 +218,14 @@ def _signal_name(exc: BaseException) -> str:
 
 
 def _cmd_stability(args: argparse.Namespace) -> int:
+    from impedance_cosim.apps.options import prepare_out
     from impedance_cosim.util.atomic import FolderLock
 
     ssp = _check(args)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_out(Path(args.out))
     record = Record(out, getattr(args, "command_line", None), ssp)
     outcome: BaseException | None = None
-    with FolderLock(out, "results folder"), stop_on_signals():
+    with FolderLock(out, "--out"), stop_on_signals():
         try:
             _run_parts(args, ssp, out, record)
             return 0

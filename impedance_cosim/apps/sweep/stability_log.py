@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from collections.abc import Callable, Hashable
 from pathlib import Path
@@ -51,12 +50,14 @@ class PartLog:
         self._load()
         lines = [{"format": FORMAT, "part": self.part, "plan": self.plan}]
         lines += [{"key": list(k), "data": d} for k, d in self.kept.items()]
-        from impedance_cosim.util.atomic import atomic_write
+        from impedance_cosim.util.atomic import LineFile, WriteError, atomic_write
 
         try:
             with atomic_write(self.path, "w", encoding="utf-8") as f:
                 f.write("".join(json.dumps(line) + "\n" for line in lines))
-            self._file = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 (closed in __exit__)
+            self._file = LineFile(self.path)
+        except WriteError as exc:
+            raise StabilityError(str(exc)) from None
         except OSError as exc:
             raise StabilityError(f"cannot write {self.path}: {exc.strerror or exc}") from None
         return self
@@ -81,15 +82,15 @@ class PartLog:
         kept is what the file holds)."""
         import signal
 
+        from impedance_cosim.util.atomic import WriteError
         from impedance_cosim.util.interrupt import StopSignals
 
         with StopSignals() as stop:
             try:
-                self._file.write(json.dumps({"key": list(key), "data": data}) + "\n")
-                self._file.flush()
-                os.fsync(self._file.fileno())
-            except OSError as exc:  # e.g. a full disk: stop with one line
-                raise StabilityError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+                self._file.append(json.dumps({"key": list(key), "data": data}) + "\n", sync=True)
+            except WriteError as exc:  # e.g. a full disk: stop with one line; the log is whole
+                note = f"it holds the {self.runs} finished runs before this one (--resume)"
+                raise exc.with_note(note) from None
             self.added[key] = data
         if stop.signum is not None:
             signal.raise_signal(stop.signum)  # now, to the command's own handler

@@ -22,7 +22,7 @@ from typing import Any
 
 from impedance_cosim.apps.sweep.metrics import METRICS
 from impedance_cosim.apps.sweep.plan import Plan, archive_payload, parse_value
-from impedance_cosim.util.atomic import lock_not_inherited
+from impedance_cosim.util.atomic import LineFile, WriteError, atomic_write, lock_not_inherited
 
 FINISHED = ("ok", "diverged", "failed")  # a row with one of these is not run again on --resume
 PLAN_FORMAT = 1
@@ -51,17 +51,12 @@ def _csv_line(cells: Sequence[str]) -> str:
 
 
 def replace_text(path: Path, text: str) -> None:
-    """Write text to a temporary name beside path, then rename it into place (never half a file)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "w", newline="") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+    """Write text to a temporary name beside path, then rename it into place (never half a file;
+    a failure is a WriteError naming path)."""
+    with atomic_write(path, "w", newline="") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def write_table(path: Path, names: Sequence[str], rows: Iterable[dict]) -> None:
@@ -192,11 +187,13 @@ class SweepTable:
                 self._load()
                 replace_text(plan_path(self.path), json.dumps(self.plan, indent=1) + "\n")
                 self._rewrite()
-                self._file = open(self.path, "a", newline="")
+                self._file = LineFile(self.path)
             except BaseException:
                 self._stack.close()
                 raise
-        except OSError as exc:  # before any run: one line, nothing lost
+        except WriteError as exc:  # before any run: one line, nothing lost
+            raise TableError(str(exc)) from None
+        except OSError as exc:
             where = exc.filename or self.path
             raise TableError(f"cannot write the table in {where}: {exc.strerror or exc}") from None
         return self
@@ -205,21 +202,25 @@ class SweepTable:
         try:
             if self._file is not None:
                 self._file.close()
-                self._rewrite()
+                try:
+                    self._rewrite()
+                except OSError:  # the table is whole as appended (a row per line), not sorted
+                    if exc[0] is None:
+                        raise
         finally:
             self._stack.close()
 
     def add(self, index: int, row: Mapping[str, Any]) -> None:
         """Append the row of the plan's point `index` (0-based) and flush it to the OS."""
         cells = row_cells(self.names, index + 1, row)
+        try:
+            self._file.append(_csv_line(cells))
+        except WriteError as exc:  # e.g. a full disk: stop the sweep with one line
+            kept = f"it holds the {len(self.cells)} rows before this one, whole"
+            raise exc.with_note(kept) from None
         self.cells[index + 1] = cells
         if row.get("status") in FINISHED:
             self.done.add(index)
-        try:
-            self._file.write(_csv_line(cells))
-            self._file.flush()
-        except OSError as exc:  # e.g. a full disk: stop the sweep with one line
-            raise TableError(f"cannot write {self.path}: {exc.strerror or exc}") from None
 
     def rows(self) -> list[dict[str, Any]]:
         """The rows so far in the plan's order, parsed as read_table parses them."""

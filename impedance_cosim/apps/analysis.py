@@ -68,19 +68,19 @@ def contact_phases(s: Signals) -> list[tuple[float, float]]:
 
 
 SETTLE_WINDOW_S = (0.6, 0.1)  # the window: from 0.6 s to 0.1 s before the contact ends
-SETTLE_BAND = 0.05  # settled: every force sample in the window within 5 % of the window's mean
+SETTLE_BAND = 0.05  # settled: the window's two halves' means within 5 % of the window's mean
 
 
 def settled_force(t: np.ndarray, force: np.ndarray, end: float) -> float | None:
     """The settled force of a contact that ends at `end`: the mean over the window SETTLE_WINDOW_S
-    before the end, when every sample there is within SETTLE_BAND of it; None when the force is
-    still moving (e.g. a run stopped during the impact) or the contact is too short."""
-    window = (t >= end - SETTLE_WINDOW_S[0]) & (t <= end - SETTLE_WINDOW_S[1])
-    if not window.any():
+    before the end, when the force is in contact all over the window and the means of its two
+    halves agree within SETTLE_BAND (sensor noise averages out, a transient or a drift does not);
+    None otherwise (e.g. a run stopped during the impact, or a contact too short)."""
+    f = force[(t >= end - SETTLE_WINDOW_S[0]) & (t <= end - SETTLE_WINDOW_S[1])]
+    if len(f) < 4 or f.min() <= 0:
         return None
-    f = force[window]
-    mean = float(f.mean())
-    if f.min() <= 0 or np.abs(f - mean).max() > SETTLE_BAND * mean:
+    mean, half = float(f.mean()), len(f) // 2
+    if abs(f[:half].mean() - f[half:].mean()) > SETTLE_BAND * mean:
         return None
     return mean
 

@@ -229,8 +229,8 @@ def test_the_heading_states_each_runs_status():
     "observer, FAILED"."""
     observer = {"scenario": "observer", "status": "ok", "summary": {}}
     failed = {"scenario": "difference", "status": "failed", "error": "plant: doStep failed"}
-    diverged = {"scenario": "difference", "status": "diverged",
-                "error": "diverged at t = 0.4825 s: controller.tau1 beyond 1e6 (-1.071e6)"}  # fmt: skip
+    error = "diverged at t = 0.4825 s: controller.tau1 beyond 1e6 (-1.071e6)"
+    diverged = {"scenario": "difference", "status": "diverged", "error": error}
     command = ["impedance-cosim", "run"]
     page = report.run_report({"command": command, "runs": [observer, failed]})
     assert "<h1>impedance-cosim run: observer ok, difference FAILED</h1>" in page

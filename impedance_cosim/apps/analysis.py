@@ -179,7 +179,7 @@ def _axes(rows: int, cols: int, title: str):
 def _finish(fig: Figure, path: Path | None) -> Figure:
     """Save the figure to path (when given) and return it (a notebook shows it)."""
     if path is not None:
-        fig.savefig(path, dpi=110)
+        fig.savefig(path, dpi=FIG4_DPI)
     return fig
 
 
@@ -250,6 +250,9 @@ def figure_3(s: Signals, path: Path | None = None) -> Figure:
     return _finish(fig, path)
 
 
+FIG4_WIDTH_INCHES, FIG4_ROW_INCHES, FIG4_DPI = 11.0, 3.4, 110  # (every figure's dpi)
+
+
 def condition_label(algorithm: str | None, overrides: Mapping[str, Any] | None = None) -> str:
     """The loop's timing condition in words (the figures' titles): sample-and-hold (Gauss-Seidel)
     or one sample of delay (Jacobi), and the plant's one explicit Euler step when set."""
@@ -275,7 +278,8 @@ def figure_4(pairs: Sequence[tuple[str, Signals, Signals]], path: Path | None = 
     scale: the growth stays visible), a stable row the whole run; each title says its range."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(11, 1.0 + 3.4 * len(pairs)), layout="constrained")
+    height = 1.0 + FIG4_ROW_INCHES * len(pairs)
+    fig = Figure(figsize=(FIG4_WIDTH_INCHES, height), layout="constrained")
     heading = "Fig. 4 - observer vs numerical differentiation in the loop"
     if len(pairs) == 1:
         heading += f"\n{pairs[0][0]}"

@@ -298,15 +298,17 @@ def figure_4(pairs: Sequence[tuple[str, Signals, Signals]], path: Path | None = 
             w = t <= t_end
             est = cartesian_velocity(s, prefix)[:-1, 0]
             ax.plot(t[w], s["plant.xd"][:-1][w], "k-", lw=1, label="actual")
-            ax.plot(t[w], est[w], "r--", lw=0.8, label=f"{name} (fed back)")
+            short = "numerical diff." if k else name
+            ax.plot(t[w], est[w], "r--", lw=0.8, label=f"{short} (fed back)")
             scale = ""
             if ends[k] is not None:  # linear near zero, logarithmic beyond 1 m/s
                 ax.set_yscale("symlog", linthresh=1.0)
                 scale = " (symlog)"
             letter = "abcdefgh"[2 * i + k]
-            short = "numerical diff." if k else name
             ax.set_title(f"{label}\n({letter}) {short} in the loop, t = {t[0]:.4g}-{t_end:.4g} s:"
                          f" {_end_text(s)}", fontsize=9)  # fmt: skip
             ax.set(xlabel="t [s]", ylabel=f"x-velocity [m/s]{scale}")
-            ax.legend(fontsize=8, loc="upper left" if ends[k] is not None else "best")
+            # where the curves are not: growth fills the right, free motion the upper half
+            loc = "lower left" if not any(ends) else "upper left" if ends[k] else "lower right"
+            ax.legend(fontsize=8, loc=loc)
     return _finish(fig, path)

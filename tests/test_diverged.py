@@ -5,6 +5,7 @@ the same in the API. Also what "settled" means in the summary, and the messages 
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -175,3 +176,17 @@ def test_the_errors_the_api_raises_are_importable():
 
     assert MasterError is Original and SspError is OriginalSsp and Divergence is not None
     assert {"MasterError", "SspError"} <= set(dir(ic))
+
+
+def test_swap_exits_diverged_too(ssp_path, native_dir, tmp_path):
+    """`swap` runs through the same code: a diverged run is exit 3 with its summary."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no C compiler: no native plant")
+    out = tmp_path / "swap"
+    argv = ["swap", "--ssp", str(ssp_path), "--replace", f"plant={native_dir / 'PumaPlant.fmu'}",
+            "--scenario", "difference", "--algorithm", "jacobi", "--stop", "1", "--out", str(out),
+            "--no-progress", "--no-figures"]  # fmt: skip
+    assert main(argv) == 3
+    summary = json.loads((out / "difference_summary.json").read_text())
+    assert summary["diverged"].startswith(DIVERGED)
+    assert json.loads((out / "run.json").read_text())["runs"][0]["status"] == "diverged"

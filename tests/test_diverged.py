@@ -61,6 +61,10 @@ def test_a_diverged_main_run_has_its_summary_and_fig4(ssp_path, tmp_path, capsys
     assert summary["diverged_signal"] == "controller.tau1" and summary["divergence_limit"] == 1e6
     pngs = sorted(p.name for p in out.glob("*.png"))
     assert pngs == ["fig4_observer_vs_difference.png"]  # Figs. 1-3 are not drawn on a divergence
+    page = check_page(out / "report.html")
+    assert page.row("contact force")[3] == "not measured: the run diverged"
+    assert page.row("gains")[3].endswith("(as in the paper)")
+    assert f"{DIVERGED} (-1.071e6): the paper's quantities are not measured" in " ".join(page.text)
 
 
 def test_the_default_run_draws_both_conditions_and_exits_ok(ssp_path, tmp_path, capsys):
@@ -190,3 +194,10 @@ def test_swap_exits_diverged_too(ssp_path, native_dir, tmp_path):
     summary = json.loads((out / "difference_summary.json").read_text())
     assert summary["diverged"].startswith(DIVERGED)
     assert json.loads((out / "run.json").read_text())["runs"][0]["status"] == "diverged"
+
+
+def test_run_help_documents_the_exit_status(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "exit status: 0 every run ok; 3 a run diverged" in help_text

@@ -129,3 +129,4 @@ PAPER: tuple[Claim, ...] = (  # what section 5 and Figs. 1-4 state: the one plac
           "Fig. 4b", _difference),
 )
 # fmt: on
+PARAMETER_CLAIMS = (_rate, _gains, _wall, _start)  # what a run was given, not what it measured

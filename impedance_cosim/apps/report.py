@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.paper_claims import PAPER, Run
+from impedance_cosim.apps.paper_claims import PAPER, PARAMETER_CLAIMS, Run
 
 REPORT_NAME = "report.html"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -243,12 +243,19 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
     if not main.get("summary"):  # the API's summary_error reads "no summary: <why>"
         reason = main.get("summary_error") or "no summary: the main run did not finish"
         parts.append(f"<p>{_e(reason[:1].upper() + reason[1:])}.</p>")
+    diverged = (main.get("summary") or {}).get("status") == "diverged"
+    if diverged:
+        parts.append(f"<p>{_e(main['summary'].get('diverged'))}: the paper's quantities are not"
+                     " measured on a diverging loop (its rows up to the divergence are in its"
+                     " CSV, its Fig. 4 below).</p>")  # fmt: skip
     rows = []
     for c in PAPER:
         try:
             measured = c.measured(main, runs)
         except (AttributeError, KeyError, TypeError, ValueError, ZeroDivisionError):
             measured = None
+        if diverged and c.measured not in PARAMETER_CLAIMS and c is not PAPER[-1]:
+            measured = "not measured: the run diverged"
         rows.append((c.quantity, c.paper, c.source, measured or "not in this run"))
     parts.append(_table(["", "the paper", "where", column], rows))
     if main.get("summary"):

@@ -1,5 +1,10 @@
 """`impedance-cosim run` and `build`: a scenario of the system to CSV, summary and figures (with
-its Fig. 4 pair), and the FMUs built when they are missing or out of date."""
+its Fig. 4 pair; for `run` under sample-and-hold also the pair under one sample of delay, the
+paper's Fig. 4), and the FMUs built when they are missing or out of date.
+
+A diverged run is a result (cosim.results): its rows, its summary, its Fig. 4, exit status 3;
+a failed one is exit status 1. The results folder describes this command alone: result files
+of an earlier one (known names only) that this one did not write are removed, said in one line."""
 
 from __future__ import annotations
 

@@ -11,12 +11,13 @@ only when first used (module __getattr__), so `import impedance_cosim` stays lig
 
 __version__ = "0.1.0"
 
-_API = ("simulate", "sweep", "Result", "RunFailedError")
+_API = ("simulate", "sweep", "Result", "RunFailedError", "MasterError", "SspError", "Divergence")
 __all__ = ["__version__", *_API]
 
 
 def __getattr__(name: str):
-    """simulate, sweep, Result, RunFailedError from impedance_cosim.api, imported on first use."""
+    """The API's names (simulate, sweep, Result and the errors it raises) from impedance_cosim.api,
+    imported on first use."""
     if name in _API:
         from impedance_cosim import api
 

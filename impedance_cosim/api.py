@@ -10,9 +10,10 @@
 - Bad arguments raise at once, before anything runs, with a one-line message: ValueError
   (malformed argument), MasterError (the system rejects it: unknown scenario or parameter, wrong
   step), SspError (a bad archive).
-- A run that fails (diverges, an FMU reports an error) does not raise: like the CLI it keeps what
-  it computed. The Result has `ok` False, `error` the reason and the rows up to the failure;
-  `result.check()` raises RunFailedError when a program prefers an exception.
+- A run that diverges or fails does not raise: like the CLI it keeps what it computed. The
+  Result has `status` "diverged" (a signal left the bound: `divergence` says where, `summary`
+  says so; the rows up to it are the result) or "failed" (an FMU reported an error), `ok` False,
+  `error` the reason; `result.check()` raises RunFailedError when a program prefers an exception.
 - Ctrl-C (Jupyter's interrupt) stops a run between blocks of steps and raises RunInterrupted (a
   KeyboardInterrupt) whose `result` is the Result with the rows computed so far.
 """
@@ -36,13 +37,14 @@ from impedance_cosim.apps.options import DEFAULT_SSP
 from impedance_cosim.apps.run import echo_fmu_output
 from impedance_cosim.cosim import provenance
 from impedance_cosim.cosim.master import Master, MasterError, RunResult
+from impedance_cosim.cosim.results import Divergence, run_status
 from impedance_cosim.cosim.ssp import SspError, SystemDescription, read_ssp
 from impedance_cosim.util.interrupt import RunInterrupted
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["Result", "RunFailedError", "simulate", "sweep", "MasterError", "SspError"]
+__all__ = ["Result", "RunFailedError", "simulate", "sweep", "MasterError", "SspError", "Divergence"]
 
 
 class RunFailedError(RuntimeError):
@@ -57,6 +59,7 @@ class Result:
         self.data: np.ndarray = run.data  # one row per sample, one column per name
         self.scenario: str = run.parameter_set
         self.error: str | None = run.error
+        self.divergence: Divergence | None = run.divergence  # where a diverged run left the bound
         self.wall_time: float = run.wall_time
         self.provenance: dict[str, Any] = record
         entry = record["runs"][0]
@@ -67,6 +70,12 @@ class Result:
     def ok(self) -> bool:
         """True when the run reached its stop time."""
         return self.error is None
+
+    @property
+    def status(self) -> str:
+        """ "ok", "diverged" (a result: `divergence` says where) or "failed" (results.run_status,
+        as in run.json and the CLI's exit status 0, 3, 1)."""
+        return run_status(self.error, self.divergence)
 
     @property
     def time(self) -> np.ndarray:
@@ -145,7 +154,7 @@ class Result:
 
         if not isinstance(path, (str, Path)):
             raise ValueError(f"path must be the file to write, like 'report.html' (got {path!r})")
-        signals = self.signals if self.summary else None  # figures as the CLI draws them
+        signals = self.signals if self.summary and self.ok else None  # as the CLI draws them
         try:
             return write_result_report(Path(path), self.provenance, signals)
         except OSError as exc:
@@ -157,9 +166,9 @@ class Result:
         return draw(self.signals, Path(path) if path is not None else None)
 
     def __repr__(self) -> str:
-        status = "ok" if self.ok else f"failed: {self.error}"
-        span = f"{self.time[-1]:g} s" if len(self.data) else "no rows"
-        return f"<Result {self.scenario!r}: {status}, {len(self.data)} rows to {span}>"
+        status = {"ok": "ok", "diverged": self.error}.get(self.status, f"failed: {self.error}")
+        rows = f"{len(self.data)} rows to {self.time[-1]:g} s" if len(self.data) else "no rows"
+        return f"<Result {self.scenario!r}: {status}, {rows}>"
 
     def __str__(self) -> str:
         text = repr(self)
@@ -329,6 +338,8 @@ def _run(
     finally:  # what Python FMUs printed, less their error reports (those are in run.error)
         echo_fmu_output(fmu_output.getvalue(), stderr)
     entry = provenance.run_entry(master, run, overrides)
+    if run.status == "diverged":
+        entry["summary"] = analysis.diverged_summary(run)
     if run.ok:
         try:
             entry["summary"] = analysis.summary(run)

@@ -44,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
 
     dist.add_parser(sub)
 
-    p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures")
+    p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures",
+                       epilog=RUN_EXIT_STATUS)  # fmt: skip
     add_run_options(p)
     p.set_defaults(func=run_cmd.cmd_run)
     from impedance_cosim.apps.sweep import command as sweep_command
@@ -77,9 +78,16 @@ def entry() -> None:
     exit_process(status)
 
 
+RUN_EXIT_STATUS = (
+    "exit status: 0 every run ok; 3 a run diverged (a result: its rows, summary and Fig. 4 are"
+    " written); 1 a run failed; 2 bad input; 130/143 interrupted by SIGINT/SIGTERM"
+)
+
+
 def _dispatch(args: argparse.Namespace) -> int:
     """Run a subcommand; every failure becomes one line on stderr and an exit status:
-    2 bad input, 1 a failed run or other error, 128 + signal number when interrupted."""
+    2 bad input, 1 a failed run or other error, 128 + signal number when interrupted; a command
+    may return 3 itself: a run diverged, which is a result (cosim.results.exit_status)."""
     from impedance_cosim.apps.options import CliError
     from impedance_cosim.cosim.fmu import FmuError
     from impedance_cosim.cosim.master import MasterError

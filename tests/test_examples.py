@@ -70,4 +70,4 @@ def test_the_notebook_runs(ssp_path, tmp_path, kernel):
     assert "report: paper_scenario.html" in text
     page = check_page(work / "paper_scenario.html")
     assert len(page.images()) == 3
-    assert "impedance_cosim.simulate: observer, ok" in " ".join(page.text)
+    assert "impedance_cosim.simulate: observer ok" in " ".join(page.text)

@@ -137,14 +137,19 @@ def test_run_writes_a_self_contained_report(paper_run, ssp_path):
     for run in record["runs"]:
         for fmu in run["fmus"].values():
             assert fmu["sha256"] in text
-    assert "impedance-cosim run: observer, ok" in text
+    assert ("impedance-cosim run: observer ok, difference ok; Fig. 4 comparison (jacobi):"
+            " observer ok, difference diverged at t = 0.4825 s") in text  # fmt: skip
     assert page.row("command")[1].endswith(f"--stop 4.5 --out {paper_run} --no-progress")
     runs = next(t for t in page.tables if t[0][0] == "scenario")
-    assert [r[:3] for r in runs[1:]] == [["observer", "ok", "1801"], ["difference", "ok", "1801"]]
+    assert [r[:3] for r in runs[1:]] == [
+        ["observer", "ok", "1801"], ["difference", "ok", "1801"],
+        ["observer (Fig. 4 comparison)", "ok", "1801"],
+        ["difference (Fig. 4 comparison)", "diverged", "194"]]  # fmt: skip
     # the summary against the paper, with this run's numbers
     summary = record["runs"][0]["summary"]
     assert page.row("contact force")[1:3] == ["19.6 N (10^4 N/m x 0.00196 m)", "section 5, Fig. 1d"]
-    assert page.row("contact force")[3].startswith(f"{summary['settled_force_N']:.2f} N settled")
+    assert "settled_force_N" not in summary  # 4.5 s: the force still moves after the impact
+    assert page.row("contact force")[3] == "not settled (contact 3.85-4.50 s)"
     assert f"peak {summary['impact_peak_N']:.1f} N" in page.row("impact")[3]
     assert page.row("update frequency")[1:] == ["400 Hz", "section 5", "400 Hz (gauss-seidel)"]
     assert page.row("gains")[3].endswith("(as in the paper)")
@@ -175,7 +180,7 @@ def test_a_failed_run_writes_a_report_saying_so(ssp_path, tmp_path):
     assert main(argv) == 1
     page = check_page(out / "report.html")
     text = " ".join(page.text)
-    assert "impedance-cosim run: observer, FAILED" in text
+    assert "impedance-cosim run: observer FAILED" in text
     assert "This command FAILED: observer: failed:" in text and "is unreachable" in text
     assert "Kept in the results folder: observer.csv (0 rows, observer), run.json" in text
     assert page.images() == [] and "No figures were made by this command." in text
@@ -192,14 +197,50 @@ def test_an_error_before_any_run_writes_no_report(ssp_path, tmp_path, capsys):
     assert not out.exists()
 
 
-def test_figures_of_an_earlier_run_are_not_shown(ssp_path, tmp_path):
+def test_files_of_an_earlier_run_are_removed(ssp_path, tmp_path, capsys):
+    """A results folder describes one run: the figures, CSVs and summaries of an earlier command
+    that this one did not write are removed (known names only), and one line says which."""
     out = tmp_path / "res"
-    argv = ["run", "--ssp", str(ssp_path), "--stop", "0.2", "--out", str(out), "--no-progress"]
-    assert main(argv) == 0 and len(check_page(out / "report.html").images()) == 4
-    assert main([*argv, "--no-figures"]) == 0  # the old figures stay in the folder ...
-    assert (out / "fig1_position_force.png").is_file()
-    page = check_page(out / "report.html")  # ... but are not this command's
+    argv = ["run", "--ssp", str(ssp_path), "--stop", "0.6", "--out", str(out), "--no-progress"]
+    assert main([*argv, "--scenario", "difference"]) == 0
+    assert len(check_page(out / "report.html").images()) == 4
+    assert (out / "difference_summary.json").is_file() and (out / "observer-jacobi.csv").is_file()
+    (out / "notes.txt").write_text("mine")  # not a name we write: left alone
+    capsys.readouterr()
+    assert main([*argv, "--no-figures"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    stale = ["difference-jacobi.csv", "difference.csv", "difference_summary.json",
+             "fig1_position_force.png", "fig2_observer.png", "fig3_velocity_tracking.png",
+             "fig4_observer_vs_difference.png", "observer-jacobi.csv"]  # fmt: skip
+    assert err == [f"impedance-cosim run: removed {len(stale)} file(s) of an earlier run from"
+                   f" {out}/: {', '.join(stale)}"]  # fmt: skip
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == [
+        "notes.txt",
+        "observer.csv",
+        "observer_summary.json",
+        "report.html",
+        "run.json",
+    ]
+    page = check_page(out / "report.html")
     assert page.images() == [] and "fig1_position_force.png" not in "".join(page.text)
+
+
+def test_the_heading_states_each_runs_status():
+    """The observer ok and the difference failed (or diverged): the heading says each, not
+    "observer, FAILED"."""
+    observer = {"scenario": "observer", "status": "ok", "summary": {}}
+    failed = {"scenario": "difference", "status": "failed", "error": "plant: doStep failed"}
+    error = "diverged at t = 0.4825 s: controller.tau1 beyond 1e6 (-1.071e6)"
+    diverged = {"scenario": "difference", "status": "diverged", "error": error}
+    command = ["impedance-cosim", "run"]
+    page = report.run_report({"command": command, "runs": [observer, failed]})
+    assert "<h1>impedance-cosim run: observer ok, difference FAILED</h1>" in page
+    assert 'class="failed">This command FAILED: difference: failed: plant: doStep' in page
+    page = report.run_report({"command": command, "runs": [observer, diverged]})
+    assert "<h1>impedance-cosim run: observer ok, difference diverged at t = 0.4825 s</h1>" in page
+    assert 'class="diverged">A run diverged (a result, exit status 3;' in page
+    page = report.run_report({"command": command, "runs": [observer]}, error=OSError("disk"))
+    assert "<h1>impedance-cosim run: observer ok, FAILED</h1>" in page
 
 
 def test_a_report_that_cannot_be_written_is_one_line(ssp_path, tmp_path, capsys):
@@ -313,7 +354,8 @@ def _dump_dom(url: str, profile: Path) -> str:
 
 def test_chromium_opens_the_report_and_decodes_every_image(paper_run, tmp_path):
     dom = _dump_dom((paper_run / "report.html").as_uri(), tmp_path / "profile")
-    assert "<h1>impedance-cosim run: observer, ok</h1>" in dom and dom.count("<img ") == 4
+    assert "<h1>impedance-cosim run: observer ok, difference ok; Fig. 4 comparison" in dom
+    assert dom.count("<img ") == 4
     # A copy with a probe: the page's own policy, plus inline script for the probe only; an
     # image from a file beside it must be refused, the embedded ones decoded.
     text = (paper_run / "report.html").read_text(encoding="utf-8")

@@ -10,7 +10,7 @@ back to their sample time; comparisons with the plant's truth (observer error, t
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -67,6 +67,34 @@ def contact_phases(s: Signals) -> list[tuple[float, float]]:
     return list(zip(starts, ends, strict=False))
 
 
+SETTLE_WINDOW_S = (0.6, 0.1)  # the window: from 0.6 s to 0.1 s before the contact ends
+SETTLE_BAND = 0.05  # settled: the window's two halves' means within 5 % of the window's mean
+
+
+def settled_force(t: np.ndarray, force: np.ndarray, end: float) -> float | None:
+    """The settled force of a contact that ends at `end`: the mean over the window SETTLE_WINDOW_S
+    before the end, when the force is in contact all over the window and the means of its two
+    halves agree within SETTLE_BAND (sensor noise averages out, a transient or a drift does not);
+    None otherwise (e.g. a run stopped during the impact, or a contact too short)."""
+    f = force[(t >= end - SETTLE_WINDOW_S[0]) & (t <= end - SETTLE_WINDOW_S[1])]
+    if len(f) < 4 or f.min() <= 0:
+        return None
+    mean, half = float(f.mean()), len(f) // 2
+    if abs(f[:half].mean() - f[half:].mean()) > SETTLE_BAND * mean:
+        return None
+    return mean
+
+
+def diverged_summary(result: Any) -> dict[str, Any]:
+    """The summary of a diverged run (results.Divergence): where it left the bound, and the span
+    of its rows; the paper's numbers are not measured on a diverging loop."""
+    d = result.divergence
+    t = result["time"]
+    return {"status": "diverged", "duration_s": float(t[-1] - t[0]) if len(t) else 0.0,
+            "diverged_at_s": d.t, "diverged_signal": d.signal, "diverged_value": d.value,
+            "divergence_limit": d.limit, "diverged": str(d)}  # fmt: skip
+
+
 def summary(s: Signals) -> dict[str, Any]:
     """The numbers that tell the paper's story (see README): contact force (impact peak, settled
     value), tracking error before contact, observer error, peak torques."""
@@ -79,9 +107,9 @@ def summary(s: Signals) -> dict[str, Any]:
         a, b = phases[0]
         out["impact_peak_N"] = float(force.max())
         out["impact_peak_time_s"] = float(t[np.argmax(force)])
-        window = (t >= b - 0.6) & (t <= b - 0.1)
-        if window.any():
-            out["settled_force_N"] = float(force[window].mean())
+        settled = settled_force(t, force, b)
+        if settled is not None:
+            out["settled_force_N"] = settled
     ex, ey = at_samples(s, "controller.e_x"), at_samples(s, "controller.e_y")
     first = phases[0][0] if phases else t[-1]
     before = (t >= min(2.0, first)) & (t < first)
@@ -99,6 +127,8 @@ def summary(s: Signals) -> dict[str, Any]:
 
 def format_summary(values: dict[str, Any]) -> str:
     """The summary as a few readable lines."""
+    if values.get("status") == "diverged":
+        return values["diverged"]
     lines = []
     phases = values.get("contact_phases_s", [])
     if phases:
@@ -113,6 +143,9 @@ def format_summary(values: dict[str, Any]) -> str:
                 f"settled contact force: {values['settled_force_N']:.2f} N"
                 f" (target {TARGET_FORCE:.1f} N)"
             )
+        else:
+            a, b = phases[0]
+            lines.append(f"settled contact force: not settled (contact {a:.2f}-{b:.2f} s)")
     else:
         lines.append("no contact with the wall")
     if "tracking_error_before_contact_m" in values:
@@ -149,7 +182,7 @@ def _finish(fig: Figure, path: Path | None) -> Figure:
         from impedance_cosim.util.atomic import atomic_path
 
         with atomic_path(path, suffix=".tmp" + Path(path).suffix) as tmp:
-            fig.savefig(tmp, dpi=110)
+            fig.savefig(tmp, dpi=FIG4_DPI)
     return fig
 
 
@@ -220,23 +253,65 @@ def figure_3(s: Signals, path: Path | None = None) -> Figure:
     return _finish(fig, path)
 
 
-def figure_4(observer_run: Signals, difference_run: Signals, path: Path | None = None) -> Figure:
-    """Fig. 4: x-velocity with the observer in the loop (a) vs with numerical differentiation in
-    the loop (b), over the whole run and over 0.25 s from the first contact."""
-    fig, ax = _axes(2, 2, "Fig. 4 - observer vs numerical differentiation in the loop")
-    runs = ((observer_run, "controller.qd_obs", "observed"),
-            (difference_run, "controller.qd_diff", "numerical differentiation"))  # fmt: skip
-    for k, (s, prefix, label) in enumerate(runs):
-        t = s["time"]
-        est = cartesian_velocity(s, prefix)[:-1, 0]
-        phases = contact_phases(s)
-        a, zoom = (phases[0][0], "the first 0.25 s of contact") if phases else (
-            max(t[0], t[-1] - 0.25), "the last 0.25 s (no contact)")  # fmt: skip
-        for j, w in enumerate((t[:-1] >= t[0], (t[:-1] >= a) & (t[:-1] <= a + 0.25))):
-            axis = ax[2 * j + k]
-            axis.plot(t[:-1][w], s["plant.xd"][:-1][w], "k-", lw=1, label="actual")
-            axis.plot(t[:-1][w], est[w], "r--", lw=0.8, label=label)
-            title = f"({'ab'[k]}) actual vs {label}" if j == 0 else zoom
-            axis.set(xlabel="t [s]", ylabel="x-velocity [m/s]", title=title)
-            axis.legend(fontsize=8)
+FIG4_WIDTH_INCHES, FIG4_ROW_INCHES, FIG4_DPI = 11.0, 3.4, 110  # (every figure's dpi)
+
+
+def condition_label(algorithm: str | None, overrides: Mapping[str, Any] | None = None) -> str:
+    """The loop's timing condition in words (the figures' titles): sample-and-hold (Gauss-Seidel)
+    or one sample of delay (Jacobi), and the plant's one explicit Euler step when set."""
+    text = ("one-sample delay (Jacobi)" if algorithm == "jacobi"
+            else "sample-and-hold (Gauss-Seidel)")  # fmt: skip
+    if str((overrides or {}).get("plant.euler_substeps", "")) in ("1", "1.0"):
+        text += ", plant: one Euler step per period"
+    return text
+
+
+def _end_text(s: Signals) -> str:
+    """How a run ended, for a title: 'diverges at t = ... s' or 'bounded to ... s'."""
+    d = getattr(s, "divergence", None)
+    if d is not None:
+        return f"diverges at t = {d.t:.4g} s"
+    return f"bounded to {s['time'][-1]:.4g} s"
+
+
+def figure_4(pairs: Sequence[tuple[str, Signals, Signals]], path: Path | None = None) -> Figure:
+    """Fig. 4: x-velocity, the truth vs the estimate fed back, with the observer (left) and with
+    numerical differentiation (right) in the loop, one row per condition (label, observer run,
+    difference run). A row where a run diverged shows the rows up to the divergence (symlog
+    scale: the growth stays visible), a stable row the whole run; each title says its range."""
+    from matplotlib.figure import Figure
+
+    height = 1.0 + FIG4_ROW_INCHES * len(pairs)
+    fig = Figure(figsize=(FIG4_WIDTH_INCHES, height), layout="constrained")
+    heading = "Fig. 4 - observer vs numerical differentiation in the loop"
+    if len(pairs) == 1:
+        heading += f"\n{pairs[0][0]}"
+    fig.suptitle(heading)
+    axes = fig.subplots(len(pairs), 2, squeeze=False)
+    for i, (label, observer_run, difference_run) in enumerate(pairs):
+        runs = ((observer_run, "controller.qd_obs", "observer"),
+                (difference_run, "controller.qd_diff", "numerical differentiation"))  # fmt: skip
+        ends = [getattr(r, "divergence", None) for r, _, _ in runs]
+        t_end = min(
+            [d.t for d in ends if d is not None] or [min(r["time"][-1] for r, _, _ in runs)]
+        )
+        for k, (s, prefix, name) in enumerate(runs):
+            ax = axes[i][k]
+            t = s["time"][:-1]
+            w = t <= t_end
+            est = cartesian_velocity(s, prefix)[:-1, 0]
+            ax.plot(t[w], s["plant.xd"][:-1][w], "k-", lw=1, label="actual")
+            short = "numerical diff." if k else name
+            ax.plot(t[w], est[w], "r--", lw=0.8, label=f"{short} (fed back)")
+            scale = ""
+            if ends[k] is not None:  # linear near zero, logarithmic beyond 1 m/s
+                ax.set_yscale("symlog", linthresh=1.0)
+                scale = " (symlog)"
+            letter = "abcdefgh"[2 * i + k]
+            ax.set_title(f"{label}\n({letter}) {short} in the loop, t = {t[0]:.4g}-{t_end:.4g} s:"
+                         f" {_end_text(s)}", fontsize=9)  # fmt: skip
+            ax.set(xlabel="t [s]", ylabel=f"x-velocity [m/s]{scale}")
+            # where the curves are not: growth fills the right, free motion the upper half
+            loc = "lower left" if not any(ends) else "upper left" if ends[k] else "lower right"
+            ax.legend(fontsize=8, loc=loc)
     return _finish(fig, path)

@@ -106,7 +106,7 @@ def run_condition(
     t, xd, xd_hat = r["time"], r["plant.xd"], r["controller.xd_hat"]
     finite = np.isfinite(xd) & (np.abs(xd) < 1e3)
     t, xd, xd_hat = t[finite], xd[finite], xd_hat[finite]
-    row = {"condition": condition.name, "velocity": source, "status": "ok" if r.ok else "diverged",
+    row = {"condition": condition.name, "velocity": source, "status": r.status,
            "t_end_s": float(r.data[-1, 0])}  # fmt: skip
     if r.ok or reference is None:
         row.update(dict.fromkeys(("onset_s", "period_samples", "growth_per_sample")))

@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.paper_claims import PAPER, Run
+from impedance_cosim.apps.paper_claims import PAPER, PARAMETER_CLAIMS, Run
 
 REPORT_NAME = "report.html"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -38,6 +38,7 @@ text-align:left;vertical-align:top}th{background:#f3f3f3}code,pre{font-size:13px
 pre{white-space:pre-wrap;word-break:break-all;background:#f6f6f6;padding:.5rem}
 .ok{background:#e6f4e6;padding:.6rem;border-left:6px solid #2a2}
 .failed{background:#fbe7e7;padding:.6rem;border-left:6px solid #c22;font-weight:600}
+.diverged{background:#fdf3dc;padding:.6rem;border-left:6px solid #d90;font-weight:600}
 figure{margin:1rem 1rem 1rem 0;display:inline-block;vertical-align:top}
 img{max-width:100%;height:auto;border:1px solid #ddd}"""
 
@@ -119,16 +120,55 @@ def _write(path: Path, text: str, error: BaseException | None) -> Path | None:
 # --- the run report ---------------------------------------------------------------------------
 
 
-def _status(record: Mapping[str, Any], error: BaseException | None) -> tuple[bool, str]:
+def _status(record: Mapping[str, Any], error: BaseException | None) -> tuple[str, str]:
+    """The command's outcome, "ok", "diverged" (a run asked for diverged: a result) or "failed"
+    (results.exit_status's order), and the runs that were not ok, as text."""
     runs = record.get("runs", [])
-    problems = [f"{r.get('scenario')}: {r.get('status')}: {r.get('error')}"
-                for r in runs if r.get("status") != "ok"]  # fmt: skip
+    asked = [r for r in runs if not r.get("role")]  # not the Fig. 4 comparison runs
+    problems = [f"{r.get('scenario')}: " + (r.get("error") if r.get("status") == "diverged"
+                else f"{r.get('status')}: {r.get('error')}")
+                for r in asked if r.get("status") != "ok"]  # fmt: skip
     text = " ".join(str(error).split()) if error is not None else ""
     if error is not None and not any(text and text in p for p in problems):
         problems.append(text or type(error).__name__)
     if not runs and not problems:
         problems.append("no run was made")
-    return not problems, "; ".join(problems)
+    statuses = [r.get("status") for r in asked]
+    if error is not None or not runs or any(s not in ("ok", "diverged") for s in statuses):
+        return "failed", "; ".join(problems)
+    return ("diverged" if "diverged" in statuses else "ok"), "; ".join(problems)
+
+
+def _heading(record: Mapping[str, Any]) -> str:
+    """Each run and its status, as the page's heading says them: 'observer ok, difference
+    diverged at t = 0.4825 s; Fig. 4 comparison (jacobi): observer ok, difference diverged ...'."""
+    groups: dict[str, list[str]] = {}
+    for r in record.get("runs", []):
+        status = str(r.get("status"))
+        if status == "diverged":
+            status = str(r.get("error") or status).partition(":")[0]  # "diverged at t = ... s"
+        elif status != "ok":
+            status = status.upper()
+        role = f"{r['role']} ({r.get('algorithm')})" if r.get("role") else ""
+        groups.setdefault(role, []).append(f"{r.get('scenario')} {status}")
+    parts = [(f"{role}: " if role else "") + ", ".join(v) for role, v in groups.items()]
+    return "; ".join(parts) or "no run"
+
+
+def _banner(kind: str, problems: str, record: Mapping[str, Any], kept: str, what: str) -> str:
+    """The line at the top of a run's page: what happened, in words a reader can act on."""
+    if kind == "failed":
+        return f"This {what} FAILED: {problems}. Kept in the results folder: {kept}."
+    others = [r for r in record.get("runs", []) if r.get("role") and r.get("status") != "ok"]
+    extra = [f"{r.get('scenario')} ({r.get('algorithm')}): {r.get('error')}" for r in others]
+    note = f" The {FIG4_NOTE}: {'; '.join(extra)}." if extra else ""
+    if kind == "diverged":
+        return (f"A run diverged (a result, exit status 3; its rows up to the divergence are"
+                f" kept): {problems}.{note} Files: {kept}.")  # fmt: skip
+    return f"All runs finished.{note} Files: {kept}."
+
+
+FIG4_NOTE = "runs under one sample of delay, for Fig. 4's second row (the paper's figure)"
 
 
 def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path) -> list[str]:
@@ -157,35 +197,40 @@ def run_report(
 ) -> str:
     """The page of one `impedance-cosim run` (or swap): record is its run.json, figures the PNG
     files it wrote, error the exception it is ending with (if any)."""
-    ok, problems = _status(record, error)
+    kind, problems = _status(record, error)
     command = record.get("command") or []
     verb = command[1] if len(command) > 1 else "run"
     scenario = _main(record.get("runs", [])).get("scenario") or "no scenario"
-    title = f"impedance-cosim {verb}: {scenario}, {'ok' if ok else 'FAILED'}"
+    heading = _heading(record)
+    failed = kind == "failed" and "FAILED" not in heading  # e.g. an error after the runs
+    title = f"impedance-cosim {verb}: {heading}" + (", FAILED" if failed else "")
     kept = ", ".join(_kept(record, figures, out))
-    banner = f"All runs finished. Files: {kept}." if ok else (
-        f"This command FAILED: {problems}. Kept in the results folder: {kept}.")  # fmt: skip
+    banner = _banner(kind, problems, record, kept, "command")
     body = _run_sections(record, figures, f"this command ({scenario})", "run.json",
                          "The columns of the CSV files that have a unit")  # fmt: skip
-    return _page(title, f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>\n{body}')
+    return _page(title, f'<p class="{kind}">{_e(banner)}</p>\n{body}')
 
 
 def result_report(record: Mapping[str, Any], figures: Sequence[Path] = ()) -> str:
     """The page of a Result of the Python API (impedance_cosim.simulate): record is its
     provenance (run.json's form, with the call instead of a command), figures its PNG files."""
-    ok, problems = _status(record, None)
+    kind, problems = _status(record, None)
     main = _main(record.get("runs", []))
     scenario = main.get("scenario") or "no scenario"
     call = str(record.get("call") or "simulate(...)")
-    title = f"impedance_cosim.{call.partition('(')[0]}: {scenario}, {'ok' if ok else 'FAILED'}"
+    title = f"impedance_cosim.{call.partition('(')[0]}: {_heading(record)}"
     rows = main.get("rows", 0)
-    banner = f"The run reached its stop time ({rows} rows)." if ok else (
-        f"This run FAILED: {problems}. The Result keeps its {rows} rows.")  # fmt: skip
+    banner = {
+        "ok": f"The run reached its stop time ({rows} rows).",
+        "diverged": f"The run diverged (a result): {problems}. The Result keeps its {rows} rows,"
+        " up to the divergence.",
+        "failed": f"This run FAILED: {problems}. The Result keeps its {rows} rows.",
+    }[kind]
     units = "The signals that have a unit"
-    none = f"No figures: {'the run has no summary' if ok else 'the run did not finish'}."
+    none = f"No figures: {'the run has no summary' if kind == 'ok' else 'the run did not finish'}."
     body = _run_sections(record, figures, f"this run ({scenario})", "Result.provenance", units,
                          none)  # fmt: skip
-    return _page(title, f'<p class="{"ok" if ok else "failed"}">{_e(banner)}</p>\n{body}')
+    return _page(title, f'<p class="{kind}">{_e(banner)}</p>\n{body}')
 
 
 def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: str, source: str,
@@ -198,12 +243,19 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
     if not main.get("summary"):  # the API's summary_error reads "no summary: <why>"
         reason = main.get("summary_error") or "no summary: the main run did not finish"
         parts.append(f"<p>{_e(reason[:1].upper() + reason[1:])}.</p>")
+    diverged = (main.get("summary") or {}).get("status") == "diverged"
+    if diverged:
+        parts.append(f"<p>{_e(main['summary'].get('diverged'))}: the paper's quantities are not"
+                     " measured on a diverging loop (its rows up to the divergence are in its"
+                     " CSV, its Fig. 4 below).</p>")  # fmt: skip
     rows = []
     for c in PAPER:
         try:
             measured = c.measured(main, runs)
         except (AttributeError, KeyError, TypeError, ValueError, ZeroDivisionError):
             measured = None
+        if diverged and c.measured not in PARAMETER_CLAIMS and c is not PAPER[-1]:
+            measured = "not measured: the run diverged"
         rows.append((c.quantity, c.paper, c.source, measured or "not in this run"))
     parts.append(_table(["", "the paper", "where", column], rows))
     if main.get("summary"):
@@ -217,7 +269,8 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
     parts.append(_table(
         ["scenario", "status", "rows", "CSV", "algorithm", "step [s]", "stop [s]", "wall time [s]",
          "real-time factor", "overrides", "error"],
-        [(r.get("scenario"), r.get("status"), r.get("rows", ""), r.get("csv", ""),
+        [(str(r.get("scenario")) + (f" ({r['role']})" if r.get("role") else ""), r.get("status"),
+          r.get("rows", ""), r.get("csv", ""),
           r.get("algorithm"), r.get("step_size"), r.get("stop_time"), r.get("wall_time_s", ""),
           r.get("real_time_factor", ""), _plain(r.get("overrides") or ""), r.get("error") or "")
          for r in runs]))  # fmt: skip

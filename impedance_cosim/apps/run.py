@@ -1,5 +1,10 @@
 """`impedance-cosim run` and `build`: a scenario of the system to CSV, summary and figures (with
-its Fig. 4 pair), and the FMUs built when they are missing or out of date."""
+its Fig. 4 pair; for `run` under sample-and-hold also the pair under one sample of delay, the
+paper's Fig. 4), and the FMUs built when they are missing or out of date.
+
+A diverged run is a result (cosim.results): its rows, its summary, its Fig. 4, exit status 3;
+a failed one is exit status 1. The results folder describes this command alone: result files
+of an earlier one (known names only) that this one did not write are removed, said in one line."""
 
 from __future__ import annotations
 
@@ -74,12 +79,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     system = args.system = read_ssp(ssp)  # closed by _dispatch()
     pair = [] if args.no_figures else ["observer", "difference"]
     for scenario in [args.scenario, *(s for s in pair if s in system.parameter_sets)]:
-        _master(args, system, overrides, scenario)
+        _master(args, system, overrides, scenario, args.algorithm)
     with FolderLock(prepare_out(out), "--out"):
         return _run_scenarios(args, ssp, overrides, out)
 
 
-def _master(args: argparse.Namespace, system, overrides: dict, scenario: str | None):
+def _master(
+    args: argparse.Namespace, system, overrides: dict, scenario: str | None, algorithm: str | None
+):
     """The master of one run of the command (MasterError for anything it refuses)."""
     from impedance_cosim.cosim.master import Master
     from impedance_cosim.cosim.realtime import realtime_setting
@@ -88,11 +95,12 @@ def _master(args: argparse.Namespace, system, overrides: dict, scenario: str | N
         system,
         parameter_set=scenario,
         overrides=overrides,
-        algorithm=args.algorithm,
+        algorithm=algorithm,
         step_size=args.step,
         stop_time=args.stop,
         fmu_files=getattr(args, "fmu_files", None),
         realtime=realtime_setting(args),
+        overrides_origin="given with --set",
     )
 
 
@@ -106,11 +114,13 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     system = args.system
     progress = not args.no_progress  # a bar on a terminal, plain periodic lines otherwise
     runs: list[dict] = []  # provenance of each run, written to run.json on every exit path
+    written: list[Path] = []  # the result files this command wrote (the rest are stale)
     started, t0 = provenance.now_utc(), time.perf_counter()
 
-    def run(scenario: str | None):
-        master = _master(args, system, overrides, scenario)
-        path = out / f"{master.parameter_set or 'run'}.csv"
+    def run(scenario: str | None, algorithm: str | None = args.algorithm, role: str | None = None):
+        master = _master(args, system, overrides, scenario, algorithm)
+        stem = master.parameter_set or "run"
+        path = out / (f"{stem}-{master.algorithm}.csv" if role else f"{stem}.csv")
         stderr, fmu_output = sys.stderr, io.StringIO()
         with CsvStream(path) as csv, contextlib.redirect_stderr(fmu_output):
             try:
@@ -119,6 +129,7 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                 exc.message += f"; {csv.rows} rows kept in {path}"
                 entry = provenance.run_entry(master, None, overrides, path, "interrupted")
                 runs.append({**entry, "rows": csv.rows, "error": exc.message})
+                written.append(path)
                 raise
             except WriteError as exc:  # e.g. a full disk: what it kept is in the message
                 entry = provenance.run_entry(master, None, overrides, path, "failed")
@@ -126,22 +137,27 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                 raise
             finally:
                 echo_fmu_output(fmu_output.getvalue(), stderr)
+        written.append(path)
         runs.append(provenance.run_entry(master, result, overrides, path))
-        status = "ok" if result.ok else "FAILED"
+        if role:
+            runs[-1]["role"] = role
         span = result.data[-1, 0] - result.data[0, 0] if len(result.data) else 0.0
         rtf = span / max(result.wall_time, 1e-9)
-        print(f"{master.parameter_set}: {status}, {len(result.data)} rows -> {path} "
+        status = {"ok": "ok", "diverged": str(result.divergence)}.get(result.status, "FAILED")
+        print(f"{stem}{f' ({role})' if role else ''}: {status}, {len(result.data)} rows -> {path} "
               f"({result.wall_time:.2f} s wall, {rtf:.1f}x real time)")  # fmt: skip
-        if not result.ok:
+        if result.status == "failed":
             error = " ".join(result.error.split())
-            print(f"impedance-cosim {args.command}: error: {master.parameter_set}: {error};"
+            print(f"impedance-cosim {args.command}: error: {stem}: {error};"
                   f" {len(result.data)} rows kept in {path}", file=sys.stderr)  # fmt: skip
         return result
 
     figures: list[Path] = []  # the figures this command wrote, for report.html
     try:
-        return _scenarios_and_figures(args, system, overrides, out, run, runs, figures)
+        return _scenarios_and_figures(args, system, overrides, out, run, runs, figures, written)
     finally:
+        if runs:  # a run started: the folder now describes this command alone
+            remove_stale(args, out, system, [*written, *figures])
         record = provenance.record(runs, started, time.perf_counter() - t0,
                                    command=args.command_line, ssp=ssp)  # fmt: skip
         try:  # never in place of the run's own error (this is a finally)
@@ -156,16 +172,22 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
                 print(f"report: {page}")
 
 
+FIG4_COMPARISON = "Fig. 4 comparison"  # the role of the runs under the paper's condition
+
+
 def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: list,
-                           figures: list) -> int:  # fmt: skip
-    """The main scenario, its summary and figures, and its Fig. 4 pair; 1 when any failed."""
+                           figures: list, written: list) -> int:  # fmt: skip
+    """The main scenario, its summary and figures, and its Fig. 4 pair (for `run` under
+    sample-and-hold also the pair under one sample of delay, the paper's Fig. 4). Exit status
+    (results.exit_status) from the runs asked for: 1 failed, 3 diverged, 0 ok."""
     from impedance_cosim.apps import analysis
+    from impedance_cosim.cosim.results import exit_status
     from impedance_cosim.util.atomic import atomic_write
 
     main = run(args.scenario)
-    if not main.ok:
+    if main.status == "failed":
         return 1
-    values = analysis.summary(main)
+    values = analysis.summary(main) if main.ok else analysis.diverged_summary(main)
     runs[-1]["summary"] = values
     print(analysis.format_summary(values))
     if "realtime" in main.info:
@@ -173,27 +195,66 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
 
         values["realtime"] = main.info["realtime"]
         print(format_realtime(main.info["realtime"]))
-    with atomic_write(out / f"{main.parameter_set}_summary.json") as f:
+    written.append(out / f"{main.parameter_set}_summary.json")
+    with atomic_write(written[-1]) as f:
         f.write(json.dumps(values, indent=2) + "\n")
+    asked = [main]
     if args.no_figures:
-        return 0
-    figures.append(_figure(analysis.figure_1, out / "fig1_position_force.png", main))
-    figures.append(_figure(analysis.figure_2, out / "fig2_observer.png", main))
-    figures.append(_figure(analysis.figure_3, out / "fig3_velocity_tracking.png", main))
-    pair = {"observer": None, "difference": None}
+        return exit_status([r.status for r in asked])
+    if main.ok:  # a diverged run's figure is its Fig. 4 (the rows up to the divergence)
+        figures.append(_figure(analysis.figure_1, out / "fig1_position_force.png", main))
+        figures.append(_figure(analysis.figure_2, out / "fig2_observer.png", main))
+        figures.append(_figure(analysis.figure_3, out / "fig3_velocity_tracking.png", main))
     source = str(overrides.get("controller.velocity_source", "")) or main.parameter_set
-    if source in pair:
-        pair[source] = main
-    for name in pair:
-        if pair[name] is None and name in system.parameter_sets:
-            pair[name] = run(name)
-    if any(r is not None and not r.ok for r in pair.values()):
+    pair = fig4_pair(system, run, {source: main} if source in FIG4_SOURCES else {})
+    asked += [r for r in pair.values() if r is not main]
+    if any(r.status == "failed" for r in asked):
         return 1
-    if all(r is not None for r in pair.values()):
+    if len(pair) == len(FIG4_SOURCES):
+        rows = [(analysis.condition_label(main.algorithm, overrides), *pair.values())]
+        if args.command == "run" and main.algorithm != "jacobi" and "realtime" not in main.info:
+            delayed = fig4_pair(system, lambda s: run(s, "jacobi", FIG4_COMPARISON), {})
+            if len(delayed) == len(FIG4_SOURCES):
+                rows.append((analysis.condition_label("jacobi", overrides), *delayed.values()))
         fig4 = out / "fig4_observer_vs_difference.png"
-        figures.append(_figure(analysis.figure_4, fig4, pair["observer"], pair["difference"]))
+        figures.append(_figure(analysis.figure_4, fig4, rows))
     print(f"figures in {out}/")
-    return 0
+    return exit_status([r.status for r in asked])
+
+
+FIG4_SOURCES = ("observer", "difference")
+
+
+def fig4_pair(system, run, have: dict) -> dict:
+    """The observer and difference runs of Fig. 4 (those in have, the others run), in that
+    order; stops at a failed run (no figure from it)."""
+    pair = {}
+    for name in FIG4_SOURCES:
+        if name not in have and name not in system.parameter_sets:
+            return pair
+        pair[name] = have.get(name) or run(name)
+        if pair[name].status == "failed":
+            return pair
+    return pair
+
+
+def remove_stale(args: argparse.Namespace, out: Path, system, owned: list[Path]) -> None:
+    """Remove result files of an earlier command from out (known names only: scenario CSVs and
+    summaries, the figures) that this command did not write; one line on stderr says which."""
+    from impedance_cosim.apps.report import CAPTIONS
+
+    names = set(CAPTIONS)
+    for ps in [*system.parameter_sets, "run"]:
+        names |= {f"{ps}.csv", f"{ps}_summary.json", f"{ps}-jacobi.csv", f"{ps}-gauss-seidel.csv"}
+    keep = {p.name for p in owned}
+    removed = []
+    for name in sorted(names - keep):
+        with contextlib.suppress(FileNotFoundError, IsADirectoryError):
+            (out / name).unlink()
+            removed.append(name)
+    if removed:
+        print(f"impedance-cosim {args.command}: removed {len(removed)} file(s) of an earlier run"
+              f" from {out}/: {', '.join(removed)}", file=sys.stderr)  # fmt: skip
 
 
 def _figure(draw, path: Path, *runs) -> Path:

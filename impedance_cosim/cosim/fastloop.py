@@ -110,7 +110,7 @@ def stepper(
     start_time: float,
     step_size: float,
     divergence_limit: float,
-    check_row: Callable[[list[str], np.ndarray, float], str | None],
+    check_row: Callable[[list[str], np.ndarray, float], Any],
 ) -> Callable[..., tuple[int, str | None]]:
     """The master's steps in the compiled loop, for its components (the master's slots, wired)
     writing into `data`: returns steps(ordered, data, names, first, count) -> (rows filled,

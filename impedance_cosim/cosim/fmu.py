@@ -27,6 +27,9 @@ from fmpy.fmi2 import (
 from impedance_cosim.cosim.fmu_files import FmuError, extractions
 
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+# pythonfmu's C++ layer logs, after the FMU's own message, "Fatal py exception encountered:
+# [getReal] PyObject_CallMethod unknown error": its own words, not the model's.
+PYTHONFMU_NOISE = ("py exception encountered", "PyObject_CallMethod")
 INT32 = (-(2**31), 2**31 - 1)  # range of fmi2Integer
 
 
@@ -104,8 +107,12 @@ class FmuInstance:
         self.messages.append((STATUS[status] if 0 <= status < 6 else str(status), cat, text))
 
     def errors(self) -> list[str]:
-        """Messages logged with Error or Fatal status (what went wrong, in the FMU's words)."""
-        return [" ".join(m.split()) for s, _, m in self.messages if s in ("Error", "Fatal")]
+        """Messages logged with Error or Fatal status (what went wrong, in the FMU's words),
+        less pythonfmu's own report of the same exception (PYTHONFMU_NOISE), when the FMU said
+        something itself."""
+        found = [" ".join(m.split()) for s, _, m in self.messages if s in ("Error", "Fatal")]
+        own = [m for m in found if not any(n in m for n in PYTHONFMU_NOISE)]
+        return own or found
 
     def error_detail(self) -> str:
         """The last error messages, for the one-line FmuError of a failed call."""

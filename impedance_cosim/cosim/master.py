@@ -18,9 +18,9 @@
   `rt.compute_s` (the step's duration) and `rt.lateness_s` (completion - deadline
   t0_wall + (i + 1) h; > 0 is a deadline miss); RunResult.info["realtime"] holds the statistics
   (see realtime_stats) and the options' notes (what the OS granted or refused).
-- Every FMI status is checked. A failing FMU, a non-finite value or a value beyond
-  `divergence_limit` stops the run with a message naming the signal and time; the rows computed so
-  far are kept in the result.
+- Every FMI status is checked. A failing FMU stops the run ("failed"); a non-finite value or a
+  value beyond `divergence_limit` stops it as "diverged" (RunResult.divergence names the signal
+  and time). Either way the rows computed so far are kept in the result.
 - Rows reach an optional sink as they are computed (results.py writes them to a CSV); SIGINT or
   SIGTERM stops a run between blocks of steps and raises RunInterrupted with the rows so far
   (interrupt.py). A run whose rows would not fit in memory is refused before it starts.
@@ -40,7 +40,7 @@ from impedance_cosim.cosim import fastloop, realtime
 from impedance_cosim.cosim.fmu import FmuError, FmuInstance
 from impedance_cosim.cosim.fmu3 import open_fmu
 from impedance_cosim.cosim.realtime import RealtimeOptions, realtime_stats
-from impedance_cosim.cosim.results import Feed, RunResult, Sink, size_problem
+from impedance_cosim.cosim.results import Divergence, Feed, RunResult, Sink, size_problem
 from impedance_cosim.cosim.run_setup import (
     ALGORITHMS,
     MasterError,
@@ -90,6 +90,7 @@ class Master:
         step_times: Callable[[int], tuple[float, float]] | None = None,
         zero_start_inputs: bool = False,
         instances: Any = None,
+        overrides_origin: str = "in overrides",
     ) -> None:
         self.system = system
         # Another engine's conventions, to compare with it (Python loop only; engines.py has
@@ -134,7 +135,12 @@ class Master:
             self.fmu_files[name] = Path(path)
         self.descriptions = read_descriptions(self.fmu_files)
         self.parameters = collect_parameters(
-            system, parameter_set, self.descriptions, self.fmu_files, overrides or {}
+            system,
+            parameter_set,
+            self.descriptions,
+            self.fmu_files,
+            overrides or {},
+            overrides_origin,  # where a bad override came from, for its message
         )
         columns = 1 + sum(len(real_outputs(md)) for md in self.descriptions.values())
         columns += len(RT_COLUMNS) if realtime else 0
@@ -182,7 +188,12 @@ class Master:
                 fmu = self.instances.take(path, name, open_fmu) if self.instances else None
                 ordered.append(_Slot(name, fmu or open_fmu(path, name)))
             self._wire(ordered)
-            self._initialize(ordered)
+            try:
+                self._initialize(ordered)
+            except FmuError as exc:  # the phase, after the component's name
+                comp, sep, rest = str(exc).partition(": ")
+                raise FmuError(f"{comp}: in initialization: {rest}" if sep else
+                               f"in initialization: {exc}") from None  # fmt: skip
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
@@ -236,6 +247,8 @@ class Master:
                 self.instances.give(s.fmu, clean) if self.instances else s.fmu.free()
             feed(data, rows, timing)
         data = data[:rows]
+        divergence = error if isinstance(error, Divergence) else None
+        error = None if error is None else str(error)
         if self.realtime:
             names = record
             data = np.hstack((data, timing[:rows]))
@@ -248,6 +261,7 @@ class Master:
             error=error,
             wall_time=wallclock.perf_counter() - started,
             info=info,
+            divergence=divergence,
         )
 
     def _progress(self, steps: int, progress: bool | TextIO) -> _RunProgress | None:
@@ -334,12 +348,13 @@ class Master:
             s.fmu.exit_initialization()
             s.values = s.read()
 
-    def _check_row(self, names: list[str], row: np.ndarray, t: float) -> str | None:
+    def _check_row(self, names: list[str], row: np.ndarray, t: float) -> Divergence | None:
+        """The first signal of row beyond the divergence limit (or not finite), or None."""
         bad = ~np.isfinite(row) | (np.abs(row) > self.divergence_limit)
         if not bad.any():
             return None
         k = int(np.argmax(bad))
-        return f"diverged at t={t:g} s: {names[k]} = {row[k]:.6g} (limit {self.divergence_limit:g})"
+        return Divergence(float(t), names[k], float(row[k]), self.divergence_limit)
 
 
 class _RunProgress(Progress):

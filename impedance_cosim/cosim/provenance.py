@@ -105,7 +105,7 @@ def run_entry(
     if result is not None:
         span = float(result.data[-1, 0] - result.data[0, 0]) if len(result.data) else 0.0
         entry.update(
-            status=status or ("ok" if result.ok else "failed"),
+            status=status or result.status,
             error=result.error,
             rows=int(len(result.data)),
             wall_time_s=round(result.wall_time, 6),

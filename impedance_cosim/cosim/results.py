@@ -27,9 +27,33 @@ MAX_RESULT_BYTES = 2**30  # the recorded rows of one run must fit in this (refus
 Sink = Callable[[list[str], np.ndarray], None]  # (column names, new rows), see Master.run
 
 
+STATUSES = ("ok", "diverged", "failed")  # a finished run is one of these (see RunResult.status)
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """Why a run diverged: a signal left the bound (or became non-finite) at time t. A diverged
+    run is a result (its rows up to t are the data), not a failure of the tools."""
+
+    t: float
+    signal: str
+    value: float
+    limit: float
+
+    def __str__(self) -> str:
+        what = f"beyond {_short(self.limit)}" if np.isfinite(self.value) else "not finite"
+        return f"diverged at t = {self.t:.6g} s: {self.signal} {what} ({_short(self.value, 4)})"
+
+
+def _short(value: float, digits: int = 6) -> str:
+    """A number as %g without the exponent's padding: 1e6, -1.071e6 (not 1e+06)."""
+    return f"{value:.{digits}g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
+
+
 @dataclass
 class RunResult:
-    """Recorded signals (rows up to where the run stopped) and why it stopped, if it failed."""
+    """Recorded signals (rows up to where the run stopped) and why it stopped: `status` "ok",
+    "diverged" (`divergence` says where; its rows are the result) or "failed" (`error`)."""
 
     names: list[str]
     data: np.ndarray
@@ -39,6 +63,7 @@ class RunResult:
     error: str | None = None
     wall_time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+    divergence: Divergence | None = None
 
     def __getitem__(self, name: str) -> np.ndarray:
         try:
@@ -49,6 +74,27 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.error is None
+
+    @property
+    def status(self) -> str:
+        """ "ok" (reached the stop time), "diverged" (a signal left the bound) or "failed"."""
+        return run_status(self.error, self.divergence)
+
+
+def run_status(error: str | None, divergence: Divergence | None = None) -> str:
+    """The one definition of a run's status: "ok" without an error, "diverged" when a signal left
+    the bound (a result), "failed" otherwise (an FMU error, a tool's failure)."""
+    if error is None:
+        return "ok"
+    return "diverged" if divergence is not None else "failed"
+
+
+def exit_status(statuses: list[str]) -> int:
+    """A command's exit status from its runs' statuses: 1 when any failed, 3 when none failed but
+    one diverged (a result a script can tell apart), 0 when all are ok."""
+    if "failed" in statuses:
+        return 1
+    return 3 if "diverged" in statuses else 0
 
 
 def size_problem(steps: int, columns: int, stop: float, step: float) -> str | None:

@@ -102,9 +102,11 @@ def collect_parameters(
     descriptions: Mapping[str, Any],
     fmu_files: Mapping[str, Path],
     overrides: Mapping[str, Any],
+    origin: str = "in overrides",
 ) -> dict[str, dict[str, Any]]:
     """Parameter values per component, checked against the FMUs' variables and units; also
-    checks every SSD connector against its FMU."""
+    checks every SSD connector against its FMU. origin: where the overrides came from, as the
+    message of a bad one says it ("in overrides", "given with --set")."""
     variables = {name: {v.name: v for v in md.modelVariables} for name, md in descriptions.items()}
     _check_connectors(system, variables, fmu_files)
     values: dict[str, dict[str, Any]] = {name: {} for name in fmu_files}
@@ -121,7 +123,7 @@ def collect_parameters(
             vector = [f"{var}{i}" for i in (1, 2, 3)] + [f"{var}_{i}" for i in (1, 2, 3)]
             targets = [n for n in vector if n in variables[comp]] or [var]
         for t in targets:
-            v = _parameter_variable(variables, comp, t, "given with --set")
+            v = _parameter_variable(variables, comp, t, origin)
             values[comp][t] = _value(v, value, f"{comp}.{t}")
     return values
 

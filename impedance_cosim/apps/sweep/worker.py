@@ -81,7 +81,7 @@ def run_point(
         if result.ok:
             row.update(run_metrics(result))
         else:
-            row["status"] = "diverged" if result.error.startswith("diverged") else "failed"
+            row["status"] = result.status  # results.run_status: diverged or failed
             row["error"] = result.error
     except RunInterruptedError:
         raise

@@ -13,17 +13,17 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import impedance_cosim
 from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.packaging import toolchains
 from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.util.atomic import temp_path
+from impedance_cosim.version import __version__
 
-REPO = Path(impedance_cosim.__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]  # the checkout (impedance_cosim/packaging/..)
 DEFAULT_OUT = REPO / "fmus"
 # The part of impedance_cosim that runs inside the FMUs (standard library only, plus pythonfmu):
 # the physics and the FMI glue, less the symbolic derivation (sympy, build time only).
-FMU_CORE = ("__init__.py", "physics", "fmi")
+FMU_CORE = ("__init__.py", "version.py", "physics", "fmi")
 NOT_BUNDLED = frozenset({"derivation.py", "bind_source.py"})
 
 
@@ -324,7 +324,7 @@ def _model_description(
         guid=guid,
         variables=cls.variables(),
         default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {impedance_cosim.__version__} ({flavour})",
+        generation_tool=f"impedance_cosim {__version__} ({flavour})",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         source_files=source_files,
         model_exchange=model_exchange,

@@ -20,7 +20,6 @@ import uuid
 import zipfile
 from pathlib import Path
 
-import impedance_cosim
 from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
@@ -36,6 +35,7 @@ from impedance_cosim.packaging.build import (
 )
 from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.util.atomic import temp_path
+from impedance_cosim.version import __version__
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 FMI3_GLUE = ("fmi3_glue.c", "fmi3_events.c", "fmi3_stubs.c", "fmi3_wrapper.h", "fmi2_hidden.h")
@@ -60,7 +60,7 @@ def _xml(cls, token: str, clock: SampleClock | None, early: bool) -> bytes:
         token=token,
         variables=cls.variables(),
         default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (native C99, FMI 3.0)",
+        generation_tool=f"impedance_cosim {__version__} (native C99, FMI 3.0)",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
         clock=clock,
@@ -164,7 +164,7 @@ def _xml_python(cls, token: str) -> bytes:
         token=token,
         variables=cls.variables(),
         default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (pythonfmu3, FMI 3.0)",
+        generation_tool=f"impedance_cosim {__version__} (pythonfmu3, FMI 3.0)",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
     )
 

@@ -18,9 +18,9 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-from impedance_cosim import __version__
 from impedance_cosim.packaging.build import DEFAULT_OUT, FMUS, NATIVE, REPO
 from impedance_cosim.packaging.build_all import build_all
+from impedance_cosim.version import __version__
 
 DATE = (2020, 1, 1, 0, 0, 0)  # the date of every member (zip cannot store times before 1980)
 NAME = f"impedance-cosim-{__version__}"

@@ -21,6 +21,7 @@ import zipfile
 from pathlib import Path
 
 from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
+from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMUS,
@@ -34,7 +35,6 @@ from impedance_cosim.packaging.build import (
     pack_native_fmu,
 )
 from impedance_cosim.packaging.isolate import content_tag, isolate
-from impedance_cosim.util.atomic import temp_path
 from impedance_cosim.version import __version__
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
@@ -137,15 +137,13 @@ def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "pyt
         digest.update(name.encode() + contents[name])
     xml = _xml_python(cls, "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}")
     target = out_dir / f"{cls.MODEL_NAME}.fmu"
-    tmp_target = temp_path(target)
-    with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+    with write_zip(target) as z:
         z.writestr(_info("modelDescription.xml"), xml)
         for name in members:
             z.writestr(
                 _info(name, 0o755 if name.startswith("binaries/") else 0o644), contents[name]
             )
         _add_documentation(z, xml, "pythonfmu3")
-    tmp_target.replace(target)
     return target
 
 

@@ -12,6 +12,7 @@ import tempfile
 from pathlib import Path
 
 from impedance_cosim.packaging import toolchains
+from impedance_cosim.packaging.archive_out import ArchiveWriteError
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMUS,
@@ -40,14 +41,26 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
     try:
         built = _build_into(stage, keys, not only)
         return [_move_into_place(path, stage, out_dir) for path in built]
+    except ArchiveWriteError as exc:  # name the file's final place, not the staging folder's
+        shutil.rmtree(stage, ignore_errors=True)
+        _remove_if_made(out_dir, created)
+        target = exc.target
+        if target.is_relative_to(stage):
+            target = out_dir / target.relative_to(stage)
+        raise exc.at(target) from None
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
-        if created:  # nothing of ours is left in a folder this build made: remove it
-            with contextlib.suppress(OSError):
-                out_dir.rmdir()
+        _remove_if_made(out_dir, created)
         raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+
+
+def _remove_if_made(out_dir: Path, created: bool) -> None:
+    """After a failed build: remove out_dir if this build made it (it holds nothing of ours)."""
+    if created:
+        with contextlib.suppress(OSError):
+            out_dir.rmdir()
 
 
 def _move_into_place(path: Path, stage: Path, out_dir: Path) -> Path:

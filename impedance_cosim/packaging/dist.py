@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import os
-import tempfile
 import textwrap
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+from impedance_cosim.packaging.archive_out import ArchiveWriteError, write_zip
 from impedance_cosim.packaging.build import DEFAULT_OUT, FMUS, NATIVE, REPO
 from impedance_cosim.packaging.build_all import build_all
 from impedance_cosim.version import __version__
@@ -80,21 +79,13 @@ def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
     members["SHA256SUMS"] = sums.encode()
     dist_dir.mkdir(parents=True, exist_ok=True)
     target = dist_dir / f"{NAME}.zip"
-    fd, tmp = tempfile.mkstemp(prefix=f".{NAME}.", suffix=".zip.tmp", dir=dist_dir)
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-            for name in sorted(members):
-                info = zipfile.ZipInfo(f"{NAME}/{name}", date_time=DATE)
-                info.compress_type = zipfile.ZIP_DEFLATED
-                info.external_attr = 0o644 << 16
-                info.create_system = 3  # Unix, whatever the building machine
-                z.writestr(info, members[name])
-        os.chmod(tmp, 0o644)  # mkstemp made it private
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with write_zip(target) as z:  # whole under its name or not there (archive_out.py)
+        for name in sorted(members):
+            info = zipfile.ZipInfo(f"{NAME}/{name}", date_time=DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            info.create_system = 3  # Unix, whatever the building machine
+            z.writestr(info, members[name])
     return target
 
 
@@ -159,6 +150,8 @@ def cmd_dist(args: argparse.Namespace) -> int:
     """`impedance-cosim dist`: build everything and write the bundle."""
     try:
         path = build_dist(Path(args.dir), Path(args.out))
+    except ArchiveWriteError:  # a full disk: a failed run (exit 1), the line names the file
+        raise
     except OSError as exc:  # an unwritable or misnamed folder: one line, not a traceback
         where = exc.filename or args.dir
         raise ValueError(f"cannot write {where}: {exc.strerror or exc}") from None

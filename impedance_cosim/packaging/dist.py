@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import io
 import textwrap
+import time
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -91,8 +93,6 @@ def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
 
 def _fmu_line(name: str, data: bytes) -> str:
     """One README line for an FMU: interfaces, platforms, what it is."""
-    import io
-
     with zipfile.ZipFile(io.BytesIO(data)) as z:
         md = ET.fromstring(z.read("modelDescription.xml"))
         platforms = sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/")})
@@ -106,17 +106,29 @@ def _fmu_line(name: str, data: bytes) -> str:
     return f"  {name}\n      {' + '.join(kinds)}; binaries: {where}\n{about}\n"
 
 
+def fmi_versions(members: dict[str, bytes]) -> str:
+    """The FMI standards of the bundle's FMUs, as the README names them ("FMI 2.0 and FMI 3.0")."""
+    versions = set()
+    for name, data in members.items():
+        if name.endswith(".fmu"):
+            with zipfile.ZipFile(io.BytesIO(data)) as z:
+                versions.add(ET.fromstring(z.read("modelDescription.xml")).get("fmiVersion"))
+    return " and ".join(f"FMI {v}" for v in sorted(versions, key=str)) or "FMI"
+
+
 def readme(members: dict[str, bytes]) -> str:
     """The bundle's README.txt, generated from what it holds."""
     fmus = "".join(_fmu_line(m, d) for m, d in sorted(members.items()) if m.endswith(".fmu"))
     ssps = "".join(f"  {m}\n" for m in sorted(members) if m.endswith(".ssp"))
     refs = "".join(f"  {m}\n" for m in sorted(members) if m.startswith("reference/"))
-    title = f"{NAME}: Impedance Control Without Using Velocity Measurements, as FMI 2.0 FMUs"
+    standards = fmi_versions(members)
+    title = f"{NAME}: Impedance Control Without Using Velocity Measurements, as {standards} FMUs"
     return f"""{title}
 {"=" * len(title)}
 
 The paper's reduced-order velocity observer + impedance controller and its 3-DOF planar
-PUMA-560 subset touching a stiff wall, as FMI 2.0 co-simulation FMUs and an SSP 1.0 system.
+PUMA-560 subset touching a stiff wall, as {standards} FMUs (Co-Simulation; the
+native ones also Model Exchange) and SSP 1.0 systems.
 Each FMU documents itself: open documentation/index.html inside it (unzip it first); it
 lists every variable with unit, range, default and meaning, the equations and the interfaces.
 
@@ -148,6 +160,7 @@ Licence: BSD-2-Clause, see LICENSE (also inside every FMU, documentation/license
 
 def cmd_dist(args: argparse.Namespace) -> int:
     """`impedance-cosim dist`: build everything and write the bundle."""
+    started = time.perf_counter()
     try:
         path = build_dist(Path(args.dir), Path(args.out))
     except ArchiveWriteError:  # a full disk: a failed run (exit 1), the line names the file
@@ -156,7 +169,19 @@ def cmd_dist(args: argparse.Namespace) -> int:
         where = exc.filename or args.dir
         raise ValueError(f"cannot write {where}: {exc.strerror or exc}") from None
     print(f"wrote {path}")
+    print(summary(path, time.perf_counter() - started))
     return 0
+
+
+def summary(path: Path, seconds: float) -> str:
+    """One line on the bundle as measured: its size, members, and the build's wall time."""
+    with zipfile.ZipFile(path) as z:
+        members = len(z.namelist())
+    size = path.stat().st_size
+    return (
+        f"{path.name}: {size / 1e6:.1f} MB ({size} bytes), {members} files; built and bundled"
+        f" in {seconds:.1f} s"
+    )
 
 
 def add_parser(sub) -> None:

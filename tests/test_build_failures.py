@@ -8,8 +8,10 @@ without its C library."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 import zipfile
 from pathlib import Path
 
@@ -152,3 +154,33 @@ def test_a_failed_build_leaves_the_folder_as_it_was(tmp_path, monkeypatch, earli
         return
     assert archives(out) == sorted(before)
     assert {name: (out / name).read_bytes() for name in before} == before
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_a_build_leaves_it_whole_or_not_there(tmp_path, signum):
+    """The signal is sent once the build has written its first FMU (into its staging folder);
+    wherever it lands, the folder ends whole (exit 0, every archive) or as it was (exit
+    128 + signal, no archive and no staging folder), never in between."""
+    out = tmp_path / "fmus"
+    proc = subprocess.Popen([*CLI, "build", "--out", str(out)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline:
+            if any(out.rglob("*.fmu")):  # in the staging folder (or, unstaged, in place)
+                break
+            time.sleep(0.05)
+        proc.send_signal(signum)
+        status = proc.wait(timeout=300)
+    finally:
+        proc.kill()
+    err = proc.stderr.read()
+    assert "Traceback" not in err, err
+    if status == 0:  # it had finished: whole
+        assert (out / "PaperScenario.ssp").is_file() and (out / "fmi3" / "PumaPlant.fmu").is_file()
+        assert not any(p.name.startswith(STAGE_PREFIX) for p in out.iterdir())
+    else:
+        assert status == 128 + signum, err
+        assert err.strip().splitlines()[-1].startswith("impedance-cosim build: interrupted"), err
+        assert not out.exists() or archives(out) == []
+    print(f"exit status {status}")

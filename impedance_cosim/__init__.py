@@ -6,10 +6,11 @@ impedance_cosim/api.py).
 
 This package's model modules (physics, fmi) and this file are bundled into the FMUs and must
 import nothing beyond the standard library (and pythonfmu in fmi.slave): the API is imported
-only when first used (module __getattr__), so `import impedance_cosim` stays light.
+only when first used (module __getattr__), so `import impedance_cosim` stays light. The version
+lives in impedance_cosim/version.py: lower layers read it there, never from this facade.
 """
 
-__version__ = "0.1.0"
+from impedance_cosim.version import __version__
 
 _API = ("simulate", "sweep", "Result", "RunFailedError", "MasterError", "SspError", "Divergence")
 __all__ = ["__version__", *_API]

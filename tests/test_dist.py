@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import re
 import subprocess
 import sys
 import zipfile
@@ -39,7 +40,11 @@ def two_builds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == f"wrote {b / 'dist' / (NAME + '.zip')}"
+    wrote, measured = done.stdout.strip().splitlines()
+    assert wrote == f"wrote {b / 'dist' / (NAME + '.zip')}"
+    # its size and the build's time as measured (printed, not asserted: they vary)
+    assert re.fullmatch(rf"{NAME}\.zip: [\d.]+ MB \(\d+ bytes\), \d+ files; built and bundled"
+                        r" in [\d.]+ s", measured), measured  # fmt: skip
     return a, b
 
 
@@ -96,6 +101,10 @@ def test_bundle_contents(two_builds):
     for member in expected_members():
         assert f"fmus/{member}" in readme, member
     assert "BSD-2-Clause" in readme
+    # it holds FMI 2.0 and FMI 3.0 FMUs, and says so (it said "as FMI 2.0 FMUs")
+    title = readme.splitlines()[0]
+    assert title.endswith("as FMI 2.0 and FMI 3.0 FMUs"), title
+    assert "as FMI 2.0 FMUs" not in readme and "as FMI 2.0 co-simulation" not in readme
     sums = dict(line.split("  ")[::-1] for line in files["SHA256SUMS"].decode().splitlines())
     assert sorted(sums) == sorted(n for n in files if n != "SHA256SUMS")
     for name, digest in sums.items():

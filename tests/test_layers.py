@@ -13,18 +13,26 @@ PACKAGES = ("impedance_cosim", "plant_model", "controller_model", "bridge_model"
 
 # bottom to top; a module belongs to the first layer whose prefix matches its name
 LAYERS = [
-    ("util", ["impedance_cosim", "impedance_cosim.util"]),
+    ("util", ["impedance_cosim.util", "impedance_cosim.version"]),
     ("physics", ["impedance_cosim.physics"]),
     ("fmi", ["impedance_cosim.fmi"]),
     ("models", ["plant_model", "controller_model", "bridge_model"]),
     ("cosim", ["impedance_cosim.cosim"]),
     ("packaging", ["impedance_cosim.packaging"]),
     ("apps", ["impedance_cosim.apps"]),
-    ("interfaces", ["impedance_cosim.api", "impedance_cosim.cli", "impedance_cosim.__main__"]),
+    # the root package is the API's facade (its __getattr__ imports api): a lower layer that
+    # imports it (`from impedance_cosim import __version__`) imports upward, around a cycle
+    (
+        "interfaces",
+        [
+            "impedance_cosim",
+            "impedance_cosim.api",
+            "impedance_cosim.cli",
+            "impedance_cosim.__main__",
+        ],
+    ),  # fmt: skip
 ]
-# The one import allowed upward: the package's lazy facade (`impedance_cosim.simulate`), resolved
-# on first use by a module-level __getattr__, never when the package (bundled in the FMUs) loads.
-FACADE = {("impedance_cosim", "impedance_cosim.api")}
+ROOT = "impedance_cosim"
 
 
 def layer_of(module: str) -> int:
@@ -66,7 +74,11 @@ def imports(name: str, path: Path, known: set[str]) -> set[str]:
                 module = ".".join(base + ([node.module] if node.module else []))
             else:
                 module = node.module or ""
-            targets = [module] + [f"{module}.{a.name}" for a in node.names]
+            names = [f"{module}.{a.name}" for a in node.names]
+            # `from pkg import submodule` runs pkg's __init__ but uses none of its names: it
+            # counts pkg only when a name imported is not a module of ours (an attribute of pkg)
+            uses_package = any(n not in known for n in names)
+            targets = ([module] if uses_package else []) + names
         else:
             continue
         for t in targets:
@@ -86,18 +98,22 @@ def test_every_module_has_a_layer():
         layer_of(name)
 
 
+def upward(name: str, deps: set[str]) -> list[str]:
+    """The imports of module name that go to a higher layer ("dep (layer)"); a module's own
+    parent packages do not count, but for the root package (the API's facade)."""
+    own = layer_of(name)
+    return sorted(
+        f"{dep} ({LAYERS[layer_of(dep)][0]})"
+        for dep in deps
+        if layer_of(dep) > own and not (dep != ROOT and (name + ".").startswith(dep + "."))
+    )
+
+
 @pytest.mark.parametrize("name", sorted(MODULES))
 def test_imports_go_downward(name):
     """A module imports only from its own layer or below."""
-    own = layer_of(name)
-    upward = sorted(
-        f"{dep} ({LAYERS[layer_of(dep)][0]})"
-        for dep in GRAPH[name]
-        if layer_of(dep) > own
-        and (name, dep) not in FACADE
-        and not (name + ".").startswith(dep + ".")  # fmt: skip
-    )
-    assert not upward, f"{name} ({LAYERS[own][0]}) imports upward: {', '.join(upward)}"
+    found = upward(name, GRAPH[name])
+    assert not found, f"{name} ({LAYERS[layer_of(name)][0]}) imports upward: {', '.join(found)}"
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -135,11 +151,18 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+def cycle_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The import graph less a package's imports of its own submodules (but the root's)."""
+    return {
+        n: {d for d in deps if n == ROOT or not d.startswith(n + ".")} for n, deps in graph.items()
+    }
+
+
 def test_no_import_cycles():
     """No modules import each other, directly or around a loop (a package's __init__ importing
-    its own submodules is not a cycle)."""
-    graph = {n: {d for d in deps if not d.startswith(n + ".")} for n, deps in GRAPH.items()}
-    found = cycles(graph)
+    its own submodules is not a cycle, but for the root package: its facade imports api, so a
+    module of any layer that imports the root closes a loop through every layer)."""
+    found = cycles(cycle_graph(GRAPH))
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
 
 
@@ -152,6 +175,32 @@ def test_the_checks_can_fail(tmp_path):
     found = imports("impedance_cosim.physics.arm", source, known)
     assert found == {"impedance_cosim.cosim.master", "plant_model.model"}
     assert layer_of("impedance_cosim.physics.arm") < layer_of("impedance_cosim.cosim.master")
-    assert layer_of("impedance_cosim") == 0 and layer_of("impedance_cosim.cli") == len(LAYERS) - 1
+    assert layer_of("impedance_cosim.util.atomic") == layer_of("impedance_cosim.version") == 0
+    assert layer_of("impedance_cosim") == layer_of("impedance_cosim.cli") == len(LAYERS) - 1
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_a_lower_layer_importing_the_root_package_is_caught(tmp_path):
+    """`from impedance_cosim import __version__` (or `import impedance_cosim`) in a lower layer is
+    an upward import and closes a cycle through the facade; `from impedance_cosim import fmi`
+    (a submodule) and the leaf `impedance_cosim.version` are not the root."""
+    known = set(MODULES)
+    for line in ("from impedance_cosim import __version__\n", "import impedance_cosim\n"):
+        source = tmp_path / "x.py"
+        source.write_text(line)
+        deps = imports("impedance_cosim.fmi.variables", source, known)
+        assert ROOT in deps, line
+        assert upward("impedance_cosim.fmi.variables", deps) == [f"{ROOT} (interfaces)"], line
+        graph = {**GRAPH, "impedance_cosim.fmi.variables": deps}
+        found = [
+            c
+            for c in cycles(cycle_graph(graph))
+            if ROOT in c and "impedance_cosim.fmi.variables" in c
+        ]
+        assert found, line  # root -> api -> ... -> fmi.variables -> root
+    source.write_text("from impedance_cosim import fmi\nfrom impedance_cosim.version import "
+                      "__version__\n")  # fmt: skip
+    deps = imports("impedance_cosim.cosim.system", source, known)
+    assert ROOT not in deps and "impedance_cosim.version" in deps
+    assert upward("impedance_cosim.cosim.system", deps) == []

@@ -49,11 +49,10 @@ def need(ok: bool, reason: str) -> None:
 
 
 def need_compiler(platform: str) -> toolchains.Toolchain:
+    """The platform's toolchain; skip (or fail in CI) when it is absent or cannot compile."""
     toolchain = toolchains.BY_PLATFORM[platform]
-    need(
-        toolchain.available(),
-        f"{toolchain.compiler} not found (apt-get install {toolchain.debian_package})",
-    )
+    problem = toolchain.problem()
+    need(problem is None, f"{problem} (apt-get install {toolchains.packages(toolchain)})")
     return toolchain
 
 
@@ -242,11 +241,17 @@ def test_missing_cross_compilers_are_a_note_not_a_failure(tmp_path, monkeypatch,
         assert binaries == [f"binaries/linux64/{fmu.stem}.so"]
 
 
-def test_a_failing_cross_compiler_fails_the_build(tmp_path, monkeypatch):
-    """A compiler that is there but fails is an error naming the platform, not a silent gap."""
-    monkeypatch.setenv("IMPCOSIM_CC_AARCH64", shutil.which("false") or "false")
+def test_a_compiler_that_fails_on_our_sources_fails_the_build(tmp_path, monkeypatch):
+    """A compiler that passes the probe but fails on the FMU's sources is an error naming the
+    platform, not a silent gap (the probe's tiny compile works, ours does not)."""
+    real = need_compiler("aarch64-linux").compiler
+    fake = tmp_path / "bin" / "aarch64-gcc-fails-on-fmus"
+    fake.parent.mkdir()
+    fake.write_text(f'#!/bin/sh\ncase "$*" in *probe.c*) exec {real} "$@";; esac\nexit 1\n')
+    fake.chmod(0o755)
+    monkeypatch.setenv("IMPCOSIM_CC_AARCH64", str(fake))
     with pytest.raises(
-        toolchains.CompileError, match="PumaPlant.so for aarch64-linux with .*false"
+        toolchains.CompileError, match="PumaPlant.so for aarch64-linux with .*fails-on-fmus"
     ):
         build_native_fmu(FMUS["plant"], tmp_path)
     assert not (tmp_path / PLANT).exists()

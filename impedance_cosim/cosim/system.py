@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 from controller_model.model import ControllerModel
-from impedance_cosim import __version__
 from impedance_cosim.fmi.units import UNITS
 from impedance_cosim.fmi.variables import AUTHOR, COPYRIGHT, Variable
+from impedance_cosim.version import __version__
 from plant_model.model import PlantModel
 
 NS = {

@@ -10,7 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from impedance_cosim import __version__
+from impedance_cosim.version import __version__
 
 # Who wrote the FMUs and under which terms (the root LICENSE; every FMU carries a copy).
 AUTHOR = "The impedance-cosim authors"

@@ -13,18 +13,18 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import impedance_cosim
 from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.packaging import toolchains
+from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.packaging.pyfmu_guard import guard_binaries
-from impedance_cosim.util.atomic import temp_path
+from impedance_cosim.version import __version__
 
-REPO = Path(impedance_cosim.__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]  # the checkout (impedance_cosim/packaging/..)
 DEFAULT_OUT = REPO / "fmus"
 # The part of impedance_cosim that runs inside the FMUs (standard library only, plus pythonfmu):
 # the physics and the FMI glue, less the symbolic derivation (sympy, build time only).
-FMU_CORE = ("__init__.py", "physics", "fmi")
+FMU_CORE = ("__init__.py", "version.py", "physics", "fmi")
 NOT_BUNDLED = frozenset({"derivation.py", "bind_source.py"})
 
 
@@ -135,8 +135,7 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
         digest.update(xml(""))
         guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
-        tmp_target = temp_path(target)
-        with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as zout:
+        with write_zip(target) as zout:
             for name in ["modelDescription.xml", *members]:
                 info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED
@@ -146,7 +145,6 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
                 else:
                     zout.writestr(info, xml(guid))
             _add_documentation(zout, xml(guid), "pythonfmu")
-        tmp_target.replace(target)
 
 
 NATIVE = REPO / "native"
@@ -220,15 +218,13 @@ def pack_native_fmu(
         binaries = toolchains.build_binaries(
             src, model_identifier, c_files, fmi_version=fmi_version
         )
-        tmp_target = temp_path(target)
-        with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+        with write_zip(target) as z:
             z.writestr(_info("modelDescription.xml"), xml)
             for name in sorted(binaries):
                 z.writestr(_info(name, 0o755), binaries[name])
             for name in sorted(sources):
                 z.writestr(_info(f"sources/{name}"), sources[name])
             _add_documentation(z, xml, "native C99")
-        tmp_target.replace(target)
     return target
 
 
@@ -279,9 +275,18 @@ def build_ssp(
     out_dir = Path(out_dir)
     source = REPO / "ssp"
     target = out_dir / f"{name}.ssp"
-    tmp_target = temp_path(target)
     scenarios = list(SCENARIOS) if scenario is None else [scenario]
-    with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+
+    def validate(archive: Path) -> None:
+        try:
+            read_ssd(str(archive), validate=True)
+            for s in scenarios:  # fmpy validates only SystemStructure.ssd (and the SSVs it binds)
+                if scenario is None and ssd_name(s) != "SystemStructure.ssd":
+                    _validate_variant(archive, ssd_name(s))
+        except Exception as exc:
+            raise ValueError(f"{target.name} does not validate: {exc}") from None
+
+    with write_zip(target, check=validate) as z:
         # writestr with fixed dates and modes (z.write would take the files' mtimes)
         for s in scenarios:
             ssd = (source / ssd_name(s)).read_bytes()
@@ -295,15 +300,6 @@ def build_ssp(
             if not fmu.is_file():
                 raise FileNotFoundError(f"{fmu} is missing: build the FMUs first")
             z.writestr(_info(comp.source), fmu.read_bytes())
-    try:
-        read_ssd(str(tmp_target), validate=True)
-        for s in scenarios:  # fmpy validates only SystemStructure.ssd (and the SSVs it binds)
-            if scenario is None and ssd_name(s) != "SystemStructure.ssd":
-                _validate_variant(tmp_target, ssd_name(s))
-    except Exception as exc:
-        tmp_target.unlink()
-        raise ValueError(f"{target.name} does not validate: {exc}") from None
-    tmp_target.replace(target)
     return target
 
 
@@ -327,7 +323,7 @@ def _model_description(
         guid=guid,
         variables=cls.variables(),
         default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {impedance_cosim.__version__} ({flavour})",
+        generation_tool=f"impedance_cosim {__version__} ({flavour})",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         source_files=source_files,
         model_exchange=model_exchange,

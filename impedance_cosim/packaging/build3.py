@@ -20,8 +20,8 @@ import uuid
 import zipfile
 from pathlib import Path
 
-import impedance_cosim
 from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
+from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMUS,
@@ -36,7 +36,7 @@ from impedance_cosim.packaging.build import (
 )
 from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.packaging.pyfmu_guard import guard_binaries
-from impedance_cosim.util.atomic import temp_path
+from impedance_cosim.version import __version__
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 FMI3_GLUE = ("fmi3_glue.c", "fmi3_events.c", "fmi3_stubs.c", "fmi3_wrapper.h", "fmi2_hidden.h")
@@ -61,7 +61,7 @@ def _xml(cls, token: str, clock: SampleClock | None, early: bool) -> bytes:
         token=token,
         variables=cls.variables(),
         default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (native C99, FMI 3.0)",
+        generation_tool=f"impedance_cosim {__version__} (native C99, FMI 3.0)",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
         model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
         clock=clock,
@@ -139,15 +139,13 @@ def build_python_fmu3(spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3" / "pyt
         digest.update(name.encode() + contents[name])
     xml = _xml_python(cls, "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}")
     target = out_dir / f"{cls.MODEL_NAME}.fmu"
-    tmp_target = temp_path(target)
-    with zipfile.ZipFile(tmp_target, "w", zipfile.ZIP_DEFLATED) as z:
+    with write_zip(target) as z:
         z.writestr(_info("modelDescription.xml"), xml)
         for name in members:
             z.writestr(
                 _info(name, 0o755 if name.startswith("binaries/") else 0o644), contents[name]
             )
         _add_documentation(z, xml, "pythonfmu3")
-    tmp_target.replace(target)
     return target
 
 
@@ -166,7 +164,7 @@ def _xml_python(cls, token: str) -> bytes:
         token=token,
         variables=cls.variables(),
         default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {impedance_cosim.__version__} (pythonfmu3, FMI 3.0)",
+        generation_tool=f"impedance_cosim {__version__} (pythonfmu3, FMI 3.0)",
         output_dependencies=cls.OUTPUT_DEPENDENCIES,
     )
 

@@ -4,11 +4,15 @@ other's caller."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
+import tempfile
 from pathlib import Path
 
+from impedance_cosim.packaging import toolchains
+from impedance_cosim.packaging.archive_out import ArchiveWriteError
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMUS,
@@ -18,20 +22,70 @@ from impedance_cosim.packaging.build import (
     build_ssp,
 )
 
+STAGE_PREFIX = ".impcosim-build-"  # the folder inside out_dir that a build writes first
+
 
 def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> list[Path]:
-    """Build the named FMUs (default: all, then the system archive) and return their paths."""
+    """Build the named FMUs (default: all, then the system archives) and return their paths.
+    Everything is built into a temporary folder inside out_dir and moved into place (one
+    atomic rename per file) only when all of it built: a failed or interrupted build leaves
+    out_dir as it was, and concurrent builds into one folder each finish whole."""
     keys = only or list(FMUS)
     unknown = [k for k in keys if k not in FMUS]
     if unknown:
         raise ValueError(f"unknown FMU {unknown}; choose from {sorted(FMUS)}")
+    out_dir = Path(out_dir)
+    created = not out_dir.exists()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=out_dir))
+    try:
+        built = _build_into(stage, keys, not only)
+        return [_move_into_place(path, stage, out_dir) for path in built]
+    except ArchiveWriteError as exc:  # name the file's final place, not the staging folder's
+        shutil.rmtree(stage, ignore_errors=True)
+        _remove_if_made(out_dir, created)
+        target = exc.target
+        if target.is_relative_to(stage):
+            target = out_dir / target.relative_to(stage)
+        raise exc.at(target) from None
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        _remove_if_made(out_dir, created)
+        raise
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _remove_if_made(out_dir: Path, created: bool) -> None:
+    """After a failed build: remove out_dir if this build made it (it holds nothing of ours)."""
+    if created:
+        with contextlib.suppress(OSError):
+            out_dir.rmdir()
+
+
+def _move_into_place(path: Path, stage: Path, out_dir: Path) -> Path:
+    """Rename a file built under stage to the same place under out_dir; its final path."""
+    target = out_dir / Path(path).relative_to(stage)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(path, target)
+    return target
+
+
+def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
+    """The build itself, into out_dir (build_all's temporary folder)."""
     built = [build_fmu(FMUS[k], out_dir) for k in keys]
     native = [k for k in keys if (NATIVE / k / "model.c").is_file()]
-    if native and shutil.which(os.environ.get("CC", "gcc")) is None:
-        print("warning: no C compiler (gcc or $CC): the native FMUs are not built", file=sys.stderr)
+    problem = toolchains.BY_PLATFORM["linux64"].problem() if native else None
+    if problem is not None:  # absent, or there but unable to compile: the Python FMUs still build
+        linux64 = toolchains.BY_PLATFORM["linux64"]
+        if linux64.available() and toolchains.require_platforms():
+            raise toolchains.broken_error(linux64, problem)
+        print(f"warning: no working C compiler (gcc or $CC: {problem}): the native FMUs are not"
+              f" built (on Debian/Ubuntu: apt-get install {toolchains.packages(linux64)})",
+              file=sys.stderr)  # fmt: skip
         native = []
     built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in native]
-    if not only:
+    if everything:
         from impedance_cosim.cosim.system import SCENARIOS
 
         flavours = [("PaperScenario", None)]

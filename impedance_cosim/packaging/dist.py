@@ -11,16 +11,17 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import os
-import tempfile
+import io
 import textwrap
+import time
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-from impedance_cosim import __version__
+from impedance_cosim.packaging.archive_out import ArchiveWriteError, write_zip
 from impedance_cosim.packaging.build import DEFAULT_OUT, FMUS, NATIVE, REPO
 from impedance_cosim.packaging.build_all import build_all
+from impedance_cosim.version import __version__
 
 DATE = (2020, 1, 1, 0, 0, 0)  # the date of every member (zip cannot store times before 1980)
 NAME = f"impedance-cosim-{__version__}"
@@ -80,28 +81,18 @@ def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
     members["SHA256SUMS"] = sums.encode()
     dist_dir.mkdir(parents=True, exist_ok=True)
     target = dist_dir / f"{NAME}.zip"
-    fd, tmp = tempfile.mkstemp(prefix=f".{NAME}.", suffix=".zip.tmp", dir=dist_dir)
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-            for name in sorted(members):
-                info = zipfile.ZipInfo(f"{NAME}/{name}", date_time=DATE)
-                info.compress_type = zipfile.ZIP_DEFLATED
-                info.external_attr = 0o644 << 16
-                info.create_system = 3  # Unix, whatever the building machine
-                z.writestr(info, members[name])
-        os.chmod(tmp, 0o644)  # mkstemp made it private
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with write_zip(target) as z:  # whole under its name or not there (archive_out.py)
+        for name in sorted(members):
+            info = zipfile.ZipInfo(f"{NAME}/{name}", date_time=DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            info.create_system = 3  # Unix, whatever the building machine
+            z.writestr(info, members[name])
     return target
 
 
 def _fmu_line(name: str, data: bytes) -> str:
     """One README line for an FMU: interfaces, platforms, what it is."""
-    import io
-
     with zipfile.ZipFile(io.BytesIO(data)) as z:
         md = ET.fromstring(z.read("modelDescription.xml"))
         platforms = sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/")})
@@ -115,17 +106,29 @@ def _fmu_line(name: str, data: bytes) -> str:
     return f"  {name}\n      {' + '.join(kinds)}; binaries: {where}\n{about}\n"
 
 
+def fmi_versions(members: dict[str, bytes]) -> str:
+    """The FMI standards of the bundle's FMUs, as the README names them ("FMI 2.0 and FMI 3.0")."""
+    versions = set()
+    for name, data in members.items():
+        if name.endswith(".fmu"):
+            with zipfile.ZipFile(io.BytesIO(data)) as z:
+                versions.add(ET.fromstring(z.read("modelDescription.xml")).get("fmiVersion"))
+    return " and ".join(f"FMI {v}" for v in sorted(versions, key=str)) or "FMI"
+
+
 def readme(members: dict[str, bytes]) -> str:
     """The bundle's README.txt, generated from what it holds."""
     fmus = "".join(_fmu_line(m, d) for m, d in sorted(members.items()) if m.endswith(".fmu"))
     ssps = "".join(f"  {m}\n" for m in sorted(members) if m.endswith(".ssp"))
     refs = "".join(f"  {m}\n" for m in sorted(members) if m.startswith("reference/"))
-    title = f"{NAME}: Impedance Control Without Using Velocity Measurements, as FMI 2.0 FMUs"
+    standards = fmi_versions(members)
+    title = f"{NAME}: Impedance Control Without Using Velocity Measurements, as {standards} FMUs"
     return f"""{title}
 {"=" * len(title)}
 
 The paper's reduced-order velocity observer + impedance controller and its 3-DOF planar
-PUMA-560 subset touching a stiff wall, as FMI 2.0 co-simulation FMUs and an SSP 1.0 system.
+PUMA-560 subset touching a stiff wall, as {standards} FMUs (Co-Simulation; the
+native ones also Model Exchange) and SSP 1.0 systems.
 Each FMU documents itself: open documentation/index.html inside it (unzip it first); it
 lists every variable with unit, range, default and meaning, the equations and the interfaces.
 
@@ -157,13 +160,28 @@ Licence: BSD-2-Clause, see LICENSE (also inside every FMU, documentation/license
 
 def cmd_dist(args: argparse.Namespace) -> int:
     """`impedance-cosim dist`: build everything and write the bundle."""
+    started = time.perf_counter()
     try:
         path = build_dist(Path(args.dir), Path(args.out))
+    except ArchiveWriteError:  # a full disk: a failed run (exit 1), the line names the file
+        raise
     except OSError as exc:  # an unwritable or misnamed folder: one line, not a traceback
         where = exc.filename or args.dir
         raise ValueError(f"cannot write {where}: {exc.strerror or exc}") from None
     print(f"wrote {path}")
+    print(summary(path, time.perf_counter() - started))
     return 0
+
+
+def summary(path: Path, seconds: float) -> str:
+    """One line on the bundle as measured: its size, members, and the build's wall time."""
+    with zipfile.ZipFile(path) as z:
+        members = len(z.namelist())
+    size = path.stat().st_size
+    return (
+        f"{path.name}: {size / 1e6:.1f} MB ({size} bytes), {members} files; built and bundled"
+        f" in {seconds:.1f} s"
+    )
 
 
 def add_parser(sub) -> None:

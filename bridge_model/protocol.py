@@ -45,6 +45,7 @@ it never steps the robot twice. See docs/hil.md for the checks on each side and 
 
 from __future__ import annotations
 
+import errno
 import hmac
 import math
 import os
@@ -173,25 +174,62 @@ def token_key(token: str, where: str = "session token") -> bytes:
     return token.encode("ascii")
 
 
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))  # fmt: skip
+_NONBLOCK = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0)
+_NONBLOCK |= getattr(os, "O_NOCTTY", 0)
+
+
 def read_token_file(path: str | os.PathLike) -> bytes:
-    """The MAC key from a token file; ValueError unless it is a regular file of ours that no one
-    else can read or write (like ssh's private keys)."""
+    """The MAC key from a token file; ValueError unless it is a regular file of ours, at most one
+    token long, that no one else can read or write (like ssh's private keys). Never blocks: it is
+    opened without following a symbolic link and without waiting (a FIFO or a device is refused
+    from fstat before any read)."""
+    key = _token_file_key(path)
+    if key is None:
+        raise ValueError(f"token file {Path(path).expanduser()}: No such file or directory")
+    return key
+
+
+def token_file_key(path: str | os.PathLike) -> tuple[bytes, bool]:
+    """The MAC key from a token file, creating the file with a new token if it does not exist
+    (write_token_file); and whether it was created. ValueError as read_token_file."""
+    key = _token_file_key(path)
+    return (key, False) if key is not None else (write_token_file(path), True)
+
+
+def _token_file_key(path: str | os.PathLike) -> bytes | None:
+    """read_token_file, but None when the file does not exist."""
     path = Path(path).expanduser()
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        fd = os.open(path, _NONBLOCK)
+    except FileNotFoundError:
+        return None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise ValueError(
+                f"token file {path}: is a symbolic link (give the file itself)"
+            ) from None
         raise ValueError(f"token file {path}: {exc.strerror}") from None
-    with os.fdopen(fd, "rb") as f:
-        info = os.fstat(f.fileno())
+    try:
+        info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"token file {path}: not a regular file")
+            kind = next((name for test, name in _KINDS if test(info.st_mode)), "not a file")
+            raise ValueError(f"token file {path}: is {kind}, not a regular file")
         if os.name == "posix":
             if info.st_uid != os.getuid():
                 raise ValueError(f"token file {path}: owned by another user")
             if info.st_mode & 0o077:
                 mode = stat.S_IMODE(info.st_mode)
                 raise ValueError(f"token file {path}: mode {mode:o} lets others read it (want 600)")
-        data = f.read(TOKEN_MAX + 2)
+        if info.st_size > TOKEN_MAX + 2:
+            raise ValueError(f"token file {path}: {info.st_size} bytes is more than one token "
+                             f"({TOKEN_MIN}-{TOKEN_MAX} characters)")  # fmt: skip
+        data = os.read(fd, TOKEN_MAX + 3)
+    except OSError as exc:
+        raise ValueError(f"token file {path}: {exc.strerror}") from None
+    finally:
+        os.close(fd)
     try:
         return token_key(data.decode("ascii"), f"token file {path}")
     except UnicodeDecodeError:

@@ -113,6 +113,32 @@ def pack(
     return body + _mac(key, body)
 
 
+_PREFIX = MAGIC + VERSION.to_bytes(2, "little")
+
+
+def header_problem(data: bytes | bytearray | memoryview) -> str:
+    """Why `data` cannot be a message of this protocol version, from its length and header alone
+    ("" when it may be one). No MAC is computed: a receiver drops most foreign datagrams (garbage,
+    other protocols, a flood) at the cost of a few comparisons."""
+    n = len(data)
+    if n < HEADER.size + MAC_SIZE:
+        return f"datagram of {n} bytes is shorter than header and MAC"
+    if n > MAX_DATAGRAM:
+        return f"datagram of {n} bytes is longer than {MAX_DATAGRAM}"
+    if data[:6] != _PREFIX:
+        if data[:4] != MAGIC:
+            return f"bad magic {bytes(data[:4])!r}"
+        return f"protocol version {int.from_bytes(data[4:6], 'little')}, expected {VERSION}"
+    kind = int.from_bytes(data[6:8], "little")
+    if kind not in TYPE_NAMES:
+        return f"unknown message type {kind}"
+    count = int.from_bytes(data[12:14], "little")
+    end = HEADER.size + 8 * count + MAC_SIZE
+    if count > MAX_VALUES or n < end or (kind != ERROR and n != end):
+        return f"{TYPE_NAMES[kind]} of {n} bytes with count {count}"
+    return ""
+
+
 class Message:
     """A decoded, authenticated message (ProtocolError / AuthenticationError otherwise)."""
 
@@ -120,26 +146,14 @@ class Message:
                  "text")  # fmt: skip
 
     def __init__(self, data: bytes, key: bytes) -> None:
-        n = len(data)
-        if n < HEADER.size + MAC_SIZE:
-            raise ProtocolError(f"datagram of {n} bytes is shorter than header and MAC")
-        if n > MAX_DATAGRAM:
-            raise ProtocolError(f"datagram of {n} bytes is longer than {MAX_DATAGRAM}")
+        problem = header_problem(data)
+        if problem:
+            raise ProtocolError(problem)
         body, mac = data[:-MAC_SIZE], data[-MAC_SIZE:]
         if not hmac.compare_digest(mac, _mac(key, body)):
             raise AuthenticationError("MAC does not verify (not signed with our session token)")
-        magic, version, kind, seq, count, code, session, stamp, echo, t, h = HEADER.unpack_from(
-            body
-        )
-        if magic != MAGIC:
-            raise ProtocolError(f"bad magic {magic!r}")
-        if version != VERSION:
-            raise ProtocolError(f"protocol version {version}, expected {VERSION}")
-        if kind not in TYPE_NAMES:
-            raise ProtocolError(f"unknown message type {kind}")
+        _, _, kind, seq, count, code, session, stamp, echo, t, h = HEADER.unpack_from(body)
         end = HEADER.size + 8 * count
-        if count > MAX_VALUES or len(body) < end or (kind != ERROR and len(body) != end):
-            raise ProtocolError(f"{TYPE_NAMES[kind]} of {n} bytes with count {count}")
         self.kind, self.seq, self.code, self.session = kind, seq, code, session
         self.stamp_ns, self.echo_ns, self.t, self.h = stamp, echo, t, h
         self.values = struct.unpack_from(f"<{count}d", body, HEADER.size)

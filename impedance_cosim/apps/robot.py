@@ -139,6 +139,8 @@ class RobotServer:
             except BlockingIOError:
                 return
             except OSError:
+                if sock.fileno() == -1:
+                    return  # a new INIT on it replaced the session (and closed its socket)
                 continue  # e.g. an ICMP error queued for the socket
             if protocol.header_problem(view[:n]):
                 self._drop("malformed", client)

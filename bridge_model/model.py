@@ -10,21 +10,25 @@ carries a session id the bridge draws at random for its INIT. A reply counts onl
 verifies, it echoes our session id, sequence number and time stamp, and it has the right kind and
 count of finite values; datagrams that fail the MAC are ignored (counted in the timeout message).
 
-Failures (all logged with the cause, the step is not taken):
+A request is sent again every min(timeout / 4, 0.1 s) while it is unanswered (the robot answers
+a repeated sequence number from its cache and never steps twice), so a lost datagram costs one
+resend, not the run. Failures (all logged with the cause, the step is not taken):
 
-- no reply within `timeout_s` (a lost or late packet, a stalled robot): "timeout after X ms
-  waiting for sequence N";
+- no reply within `timeout_s` (at most 60 s; lost packets, a stalled robot): "timeout after X ms
+  waiting for the reply to STEP sequence N from HOST:PORT (sent K times)";
 - the robot process is gone (ICMP port unreachable on loopback): "robot process not reachable";
 - a reply with another sequence number, or that does not echo the request: "reply had sequence
   M, expected N";
 - the robot no longer has our session (it restarted, or another bridge opened a session) or says
   we are out of sequence: "the robot lost this session";
-- the robot refuses the step (ERROR message): "robot refused STEP N: <its message>".
+- the robot refuses the step (ERROR message): "robot refused STEP N: <its message>";
+- a SIGINT or SIGTERM the host recorded (the master's StopSignals) ends any wait within 0.1 s:
+  "interrupted by SIGINT while waiting for the reply to ..." (impedance_cosim/fmi/host.py).
 
-Every failure makes doStep return fmi2Discard (see BridgePlant.py). All but the last also break
-the link: the bridge refuses every later step (the robot may or may not have taken the lost step,
-so the lock-step pairing is gone). At initialization the bridge
-resends INIT every 0.1 s until `init_timeout_s` (the robot may still be starting).
+Every failure makes doStep return fmi2Discard (see BridgePlant.py). All but the refusal also
+break the link: the bridge refuses every later step (the robot may or may not have taken the lost
+step, so the lock-step pairing is gone). At initialization the bridge resends INIT every 0.1 s
+until `init_timeout_s` (at most 600 s; the robot may still be starting).
 
 Standard library only (it runs inside the FMU, which bundles plant_model for the interface).
 """
@@ -39,12 +43,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridge_model import protocol
+from impedance_cosim.fmi.host import pending_signal, signal_text
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
 from impedance_cosim.fmi.variables import Variable, parameters_of
 from impedance_cosim.physics.arm import _p, check_fields
 from plant_model.model import INPUTS, PlantModel
 
-RESEND_S = 0.1
+RESEND_MAX_S = 0.1  # an unanswered request goes again after min(timeout / 4, this)
 
 
 @dataclass(frozen=True)
@@ -55,8 +60,10 @@ class BridgeSetup:
         default="127.0.0.1", metadata={"description": "Robot process address (IPv4)"}
     )
     robot_port: int = _p(50400, "", "Robot process UDP port", 1)
-    timeout_s: float = _p(0.05, "s", "Per-step timeout waiting for the robot's reply", 0.0)
-    init_timeout_s: float = _p(2.0, "s", "Time the robot has to answer the first INIT", 0.0)
+    timeout_s: float = _p(0.05, "s", "Time the robot has to answer a step (resent meanwhile)",
+                          0.0, 60.0)  # fmt: skip
+    init_timeout_s: float = _p(2.0, "s", "Time the robot has to answer the first INIT", 0.0,
+                               600.0)  # fmt: skip
     robot_token_file: str = field(
         default="",
         metadata={"description": "File with the session token shared with the robot (mode 600)"},
@@ -136,7 +143,7 @@ class BridgeModel(FmuModel):
         self.seq = 0
         self.answered = -1
         self.failed: str | None = None
-        reply = self._request(protocol.INIT, self.t, 0.0, plant, self.setup.init_timeout_s, True)
+        reply = self._request(protocol.INIT, self.t, 0.0, plant, self.setup.init_timeout_s)
         self._take(reply)
         self.rtt = 0.0  # outputs at initialization do not depend on the exchange's timing
 
@@ -147,52 +154,40 @@ class BridgeModel(FmuModel):
 
     # --- the exchange ---------------------------------------------------------------------------
 
-    def _request(self, kind: int, t: float, h: float, values, timeout: float, resend: bool):
-        """Send one request (seq = self.seq) and return its reply; LinkError on failure."""
+    def _request(self, kind: int, t: float, h: float, values, timeout: float):
+        """Send one request (seq = self.seq), again every min(timeout / 4, RESEND_MAX_S) while it
+        is unanswered (the robot answers a repeat from its cache), and return its reply within
+        `timeout`; LinkError on failure, or as soon as the host has recorded a stop signal."""
         seq = self.seq
         stamp = protocol.now_ns()
         data = protocol.pack(self.key, kind, seq, self.session, t, h, values, stamp_ns=stamp)
+        what = f"the reply to {protocol.TYPE_NAMES[kind]} sequence {seq} from {self.where}"
         start = time.perf_counter()
-        deadline = start + timeout
-        refused = False
-        self._send(data)
-        next_send = start + RESEND_S
+        deadline, interval = start + timeout, max(min(timeout / 4, RESEND_MAX_S), 1e-3)
+        next_send, sends, refused = start, 0, False
         while True:
+            signum = pending_signal()
+            if signum is not None:
+                raise LinkError(f"interrupted by {signal_text(signum)} while waiting for {what}")
             now = time.perf_counter()
-            if now >= deadline:
-                what = protocol.TYPE_NAMES[kind]
-                cause = (
-                    f"robot process not reachable at {self.where} (connection refused)"
-                    if refused
-                    else f"timeout after {1e3 * timeout:g} ms waiting for the reply to {what}"
-                    f" sequence {seq} from {self.where}"
-                )
-                if self.rejected:
-                    cause += f" ({self.rejected} datagrams that failed the checks were ignored)"
-                if kind == protocol.INIT and not refused:
-                    cause += " (a robot with another session token drops every message)"
-                raise LinkError(cause)
-            wait = deadline - now
-            if resend:
-                wait = min(wait, max(next_send - now, 1e-4))
-            self.sock.settimeout(wait)
+            if sends and now >= deadline:
+                raise LinkError(self._timeout_cause(kind, timeout, what, sends, refused))
+            if now >= next_send:
+                self._send(data)
+                sends, next_send = sends + 1, now + interval
+            self.sock.settimeout(max(min(deadline, next_send) - now, 1e-4))
             try:
                 raw = self.sock.recv(65536)
             except TimeoutError:
-                if resend and time.perf_counter() >= next_send:
-                    next_send += RESEND_S
-                    self._send(data)
                 continue
             except ConnectionRefusedError:
                 # Loopback: the robot's port is closed (process not started, or gone).
-                if not resend:
+                if kind != protocol.INIT:
                     raise LinkError(
                         f"robot process not reachable at {self.where} (connection refused)"
                         f" while waiting for sequence {seq}"
                     ) from None
-                refused = True
-                time.sleep(min(RESEND_S, max(0.0, deadline - time.perf_counter())))
-                next_send = time.perf_counter()
+                refused = True  # it may still be starting: the next INIT goes at next_send
                 continue
             try:
                 msg = protocol.Message(raw, self.key)
@@ -229,6 +224,19 @@ class BridgeModel(FmuModel):
             self.rtt = time.perf_counter() - start
             return msg
 
+    def _timeout_cause(self, kind: int, timeout: float, what: str, sends: int, refused: bool):
+        """Why a request went unanswered, for LinkError."""
+        if refused:
+            cause = f"robot process not reachable at {self.where} (connection refused)"
+        else:
+            times = "once" if sends == 1 else f"{sends} times"
+            cause = f"timeout after {1e3 * timeout:g} ms waiting for {what} (sent {times})"
+        if self.rejected:
+            cause += f" ({self.rejected} datagrams that failed the checks were ignored)"
+        if kind == protocol.INIT and not refused:
+            cause += " (a robot with another session token drops every message)"
+        return cause
+
     def _send(self, data: bytes) -> None:
         try:
             self.sock.send(data)
@@ -251,7 +259,7 @@ class BridgeModel(FmuModel):
             raise ModelError(f"communication step must be > 0 and finite (got {h})")
         self.seq += 1
         try:
-            msg = self._request(protocol.STEP, t, h, inputs, self.setup.timeout_s, False)
+            msg = self._request(protocol.STEP, t, h, inputs, self.setup.timeout_s)
         except LinkError as exc:
             self.failed = str(exc)
             raise

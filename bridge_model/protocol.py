@@ -45,6 +45,7 @@ it never steps the robot twice. See docs/hil.md for the checks on each side and 
 
 from __future__ import annotations
 
+import errno
 import hmac
 import math
 import os
@@ -112,6 +113,32 @@ def pack(
     return body + _mac(key, body)
 
 
+_PREFIX = MAGIC + VERSION.to_bytes(2, "little")
+
+
+def header_problem(data: bytes | bytearray | memoryview) -> str:
+    """Why `data` cannot be a message of this protocol version, from its length and header alone
+    ("" when it may be one). No MAC is computed: a receiver drops most foreign datagrams (garbage,
+    other protocols, a flood) at the cost of a few comparisons."""
+    n = len(data)
+    if n < HEADER.size + MAC_SIZE:
+        return f"datagram of {n} bytes is shorter than header and MAC"
+    if n > MAX_DATAGRAM:
+        return f"datagram of {n} bytes is longer than {MAX_DATAGRAM}"
+    if data[:6] != _PREFIX:
+        if data[:4] != MAGIC:
+            return f"bad magic {bytes(data[:4])!r}"
+        return f"protocol version {int.from_bytes(data[4:6], 'little')}, expected {VERSION}"
+    kind = int.from_bytes(data[6:8], "little")
+    if kind not in TYPE_NAMES:
+        return f"unknown message type {kind}"
+    count = int.from_bytes(data[12:14], "little")
+    end = HEADER.size + 8 * count + MAC_SIZE
+    if count > MAX_VALUES or n < end or (kind != ERROR and n != end):
+        return f"{TYPE_NAMES[kind]} of {n} bytes with count {count}"
+    return ""
+
+
 class Message:
     """A decoded, authenticated message (ProtocolError / AuthenticationError otherwise)."""
 
@@ -119,26 +146,14 @@ class Message:
                  "text")  # fmt: skip
 
     def __init__(self, data: bytes, key: bytes) -> None:
-        n = len(data)
-        if n < HEADER.size + MAC_SIZE:
-            raise ProtocolError(f"datagram of {n} bytes is shorter than header and MAC")
-        if n > MAX_DATAGRAM:
-            raise ProtocolError(f"datagram of {n} bytes is longer than {MAX_DATAGRAM}")
+        problem = header_problem(data)
+        if problem:
+            raise ProtocolError(problem)
         body, mac = data[:-MAC_SIZE], data[-MAC_SIZE:]
         if not hmac.compare_digest(mac, _mac(key, body)):
             raise AuthenticationError("MAC does not verify (not signed with our session token)")
-        magic, version, kind, seq, count, code, session, stamp, echo, t, h = HEADER.unpack_from(
-            body
-        )
-        if magic != MAGIC:
-            raise ProtocolError(f"bad magic {magic!r}")
-        if version != VERSION:
-            raise ProtocolError(f"protocol version {version}, expected {VERSION}")
-        if kind not in TYPE_NAMES:
-            raise ProtocolError(f"unknown message type {kind}")
+        _, _, kind, seq, count, code, session, stamp, echo, t, h = HEADER.unpack_from(body)
         end = HEADER.size + 8 * count
-        if count > MAX_VALUES or len(body) < end or (kind != ERROR and len(body) != end):
-            raise ProtocolError(f"{TYPE_NAMES[kind]} of {n} bytes with count {count}")
         self.kind, self.seq, self.code, self.session = kind, seq, code, session
         self.stamp_ns, self.echo_ns, self.t, self.h = stamp, echo, t, h
         self.values = struct.unpack_from(f"<{count}d", body, HEADER.size)
@@ -173,25 +188,62 @@ def token_key(token: str, where: str = "session token") -> bytes:
     return token.encode("ascii")
 
 
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))  # fmt: skip
+_NONBLOCK = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0)
+_NONBLOCK |= getattr(os, "O_NOCTTY", 0)
+
+
 def read_token_file(path: str | os.PathLike) -> bytes:
-    """The MAC key from a token file; ValueError unless it is a regular file of ours that no one
-    else can read or write (like ssh's private keys)."""
+    """The MAC key from a token file; ValueError unless it is a regular file of ours, at most one
+    token long, that no one else can read or write (like ssh's private keys). Never blocks: it is
+    opened without following a symbolic link and without waiting (a FIFO or a device is refused
+    from fstat before any read)."""
+    key = _token_file_key(path)
+    if key is None:
+        raise ValueError(f"token file {Path(path).expanduser()}: No such file or directory")
+    return key
+
+
+def token_file_key(path: str | os.PathLike) -> tuple[bytes, bool]:
+    """The MAC key from a token file, creating the file with a new token if it does not exist
+    (write_token_file); and whether it was created. ValueError as read_token_file."""
+    key = _token_file_key(path)
+    return (key, False) if key is not None else (write_token_file(path), True)
+
+
+def _token_file_key(path: str | os.PathLike) -> bytes | None:
+    """read_token_file, but None when the file does not exist."""
     path = Path(path).expanduser()
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        fd = os.open(path, _NONBLOCK)
+    except FileNotFoundError:
+        return None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise ValueError(
+                f"token file {path}: is a symbolic link (give the file itself)"
+            ) from None
         raise ValueError(f"token file {path}: {exc.strerror}") from None
-    with os.fdopen(fd, "rb") as f:
-        info = os.fstat(f.fileno())
+    try:
+        info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"token file {path}: not a regular file")
+            kind = next((name for test, name in _KINDS if test(info.st_mode)), "not a file")
+            raise ValueError(f"token file {path}: is {kind}, not a regular file")
         if os.name == "posix":
             if info.st_uid != os.getuid():
                 raise ValueError(f"token file {path}: owned by another user")
             if info.st_mode & 0o077:
                 mode = stat.S_IMODE(info.st_mode)
                 raise ValueError(f"token file {path}: mode {mode:o} lets others read it (want 600)")
-        data = f.read(TOKEN_MAX + 2)
+        if info.st_size > TOKEN_MAX + 2:
+            raise ValueError(f"token file {path}: {info.st_size} bytes is more than one token "
+                             f"({TOKEN_MIN}-{TOKEN_MAX} characters)")  # fmt: skip
+        data = os.read(fd, TOKEN_MAX + 3)
+    except OSError as exc:
+        raise ValueError(f"token file {path}: {exc.strerror}") from None
+    finally:
+        os.close(fd)
     try:
         return token_key(data.decode("ascii"), f"token file {path}")
     except UnicodeDecodeError:

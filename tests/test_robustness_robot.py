@@ -84,8 +84,12 @@ class Peer:
         self.sock.close()
 
 
+# A run that is not about timeouts must not fail because the machine is slow.
+PATIENT = {"plant.timeout_s": 20.0, "plant.init_timeout_s": 60.0}
+
+
 def bridged(system, bridge, port, stop, **kw):
-    overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN}
+    overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN, **PATIENT}
     master = Master(system, stop_time=stop, fmu_files={"plant": bridge}, overrides=overrides, **kw)
     return master.run()
 
@@ -320,7 +324,8 @@ def test_a_robot_with_a_token_file_serves_a_bridge_given_the_file(system, fmu_di
     token_file = tmp_path / "robot.token"
     proc, port = start_robot(None, extra=["--token-file", str(token_file)])
     try:
-        overrides = {"plant.robot_port": port, "plant.robot_token_file": str(token_file)}
+        overrides = {"plant.robot_port": port, "plant.robot_token_file": str(token_file),
+                     **PATIENT}  # fmt: skip
         result = Master(system, stop_time=0.5, fmu_files={"plant": fmu_dir / "BridgePlant.fmu"},
                         overrides=overrides).run()  # fmt: skip
     finally:

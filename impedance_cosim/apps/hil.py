@@ -83,21 +83,23 @@ def replacement_problems(
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
+    """Serve until --duration ends (exit 0) or a signal comes: SIGINT and SIGTERM unwind as
+    KeyboardInterrupt (cli.sigterm_raises) to _dispatch, which prints one line and returns
+    128 + the signal's number (130, 143)."""
     from impedance_cosim.apps.options import parse_overrides
 
     realtime, tick, max_step, duration, faults, key = _robot_options(args)
     server = RobotServer(key, args.host, args.port, realtime, parse_overrides(args.set or []),
-                         faults, tick=tick, max_step=max_step)  # fmt: skip
-    host, port = server.address
-    print(f"{LISTENING} {host}:{port} ({server.mode})", flush=True)
-    if not ipaddress.ip_address(host).is_loopback:
-        print(f"robot: {host} is not a loopback address: every machine that can reach port {port}"
-              " can send datagrams here (the token keeps them out; the traffic is not encrypted:"
-              " docs/hil.md, Trust model)", file=sys.stderr, flush=True)  # fmt: skip
+                         faults, tick=tick, max_step=max_step,
+                         allow_remote=args.allow_remote)  # fmt: skip
     try:
+        host, port = server.address
+        print(f"{LISTENING} {host}:{port} ({server.mode})", flush=True)
+        if not ipaddress.ip_address(host).is_loopback:  # only with --allow-remote
+            print(f"robot: {host} is not a loopback address: every machine that can reach port"
+                  f" {port} can send datagrams here (the token keeps them out; the traffic is not"
+                  " encrypted: docs/hil.md, Trust model)", file=sys.stderr, flush=True)  # fmt: skip
         server.serve(duration)
-    except KeyboardInterrupt:
-        pass
     finally:
         server.close()
     return 0
@@ -146,10 +148,9 @@ def _session_key(token_file: str | None) -> bytes:
     if not token_file:
         raise ValueError(f"no session token: give --token-file PATH (a new token is written there "
                          f"if it does not exist) or set {protocol.TOKEN_ENV}")  # fmt: skip
-    if Path(token_file).expanduser().exists():
-        return protocol.read_token_file(token_file)
-    key = protocol.write_token_file(token_file)
-    print(f"robot: new session token written to {token_file} (mode 600)", file=sys.stderr)
+    key, created = protocol.token_file_key(token_file)  # the bridge's reader (never blocks)
+    if created:
+        print(f"robot: new session token written to {token_file} (mode 600)", file=sys.stderr)
     return key
 
 
@@ -165,6 +166,13 @@ def _cmd_swap(args: argparse.Namespace) -> int:
         replace[comp.strip()] = Path(path.strip())
     _check_archives(replace)
     overrides = options.parse_overrides(args.set or [])
+    for name, value in overrides.items():  # a bridge's token file: refused before anything runs
+        comp, _, var = name.partition(".")
+        if var == "robot_token_file" and comp in replace:
+            try:
+                protocol.read_token_file(value)  # the bridge's own reader (never blocks)
+            except ValueError as exc:
+                raise options.CliError(f"--set {name}: {exc}") from None
     ssp = Path(args.ssp) if args.ssp else options.DEFAULT_SSP
     run.ensure_built(args, ssp)
     args.ssp = str(ssp)
@@ -240,7 +248,14 @@ def add_parsers(sub) -> None:
         description="Serve the plant over UDP for the bridge FMU (fmus/BridgePlant.fmu). Prints "
         f"'{LISTENING} HOST:PORT (mode)' first. Runs until killed (or --duration).",
     )
-    p.add_argument("--host", default="127.0.0.1", help="address to bind (default loopback)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to bind (default loopback; any other needs --allow-remote)",
+    )
+    p.add_argument("--allow-remote", action="store_true",
+                   help="allow a --host other machines can reach ('' or 0.0.0.0: every "
+                        "interface); see docs/hil.md, Trust model")  # fmt: skip
     p.add_argument("--port", default="50400", help="UDP port (0: a free one)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="realtime", action="store_false", default=False,

@@ -10,6 +10,12 @@ Everything that arrives is hostile until checked: a datagram must verify with th
 values, integer parameters, step size, start time, session, sequence). A request that fails a
 check gets an ERROR reply with a fixed text (no internal state); nothing a peer sends stops the
 process. Drops and refusals are counted and logged at most once a second.
+
+A flood of foreign datagrams cannot delay or drop a session's: the session has a socket of its
+own that the kernel gives only its bridge's datagrams (robot_net), served first; the listening
+socket is drained in batches, and what cannot be a request (length, header) is dropped before
+any MAC is computed. A repeated request (same session and sequence number: the bridge resends
+an unanswered one) gets the cached reply; the plant never steps twice.
 """
 
 from __future__ import annotations
@@ -22,48 +28,14 @@ import sys
 import time
 from collections import Counter, deque
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 from bridge_model import protocol
+from impedance_cosim.apps import robot_net
+from impedance_cosim.apps.robot_options import MAX_STEP_RANGE, TICK_RANGE, Fault, check_range
 
-FAULTS = ("drop", "late", "seq", "exit", "reset")
-TICK_RANGE = (1e-5, 0.1)  # s
-MAX_STEP_RANGE = (1e-6, 10.0)  # s
+BATCH = 64  # datagrams handled from one socket before the other's turn
 SEEN_SESSIONS = 4096  # session ids remembered (a replayed INIT of an old session is refused)
-
-
-@dataclass(frozen=True)
-class Fault:
-    """An injected fault at the STEP with sequence `seq`: drop (never answer), late (answer after
-    `arg` seconds), seq (answer with the sequence number + 1000), exit (the process exits at
-    once, without answering), reset (forget the session first, as a restarted robot would)."""
-
-    kind: str
-    seq: int
-    arg: float = 0.0
-
-    @classmethod
-    def parse(cls, text: str) -> Fault:
-        kind, _, rest = text.partition("@")
-        seq, _, arg = rest.partition(":")
-        usage = f"--fault expects drop@N, late@N:SECONDS, seq@N, exit@N or reset@N (got {text!r})"
-        if kind not in FAULTS or not seq.isdigit() or not 0 < int(seq) < 2**32:
-            raise ValueError(usage)
-        try:
-            value = float(arg or 0.0)
-        except ValueError:
-            raise ValueError(usage) from None
-        if not 0.0 <= value <= 60.0:
-            raise ValueError(f"--fault {text!r}: the delay must be 0-60 s")
-        return cls(kind, int(seq), value)
-
-
-def check_range(name: str, value: float, low: float, high: float) -> float:
-    """value if it is a finite number in [low, high], else ValueError naming the option."""
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
-        raise ValueError(f"{name} must be a number from {low:g} to {high:g} (got {value!r})")
-    return float(value)
 
 
 class RobotServer:
@@ -80,6 +52,7 @@ class RobotServer:
         tick: float = 0.001,
         max_step: float = 1.0,
         log=None,
+        allow_remote: bool = False,
     ) -> None:
         from impedance_cosim.fmi.model import ModelError
         from plant_model.model import PlantModel
@@ -105,14 +78,11 @@ class RobotServer:
         self.realtime = realtime
         self.faults = {f.seq: f for f in faults or []}
         self.log = log or _log_to_stderr
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self.sock.bind((host, port))
-        except (OSError, OverflowError) as exc:
-            self.sock.close()
-            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-            raise ValueError(f"cannot listen on UDP {host}:{port}: {why}") from None
+        self.sock = robot_net.listen(host, port, allow_remote)  # ValueError: one line
         self.address = self.sock.getsockname()
+        self.session_sock: socket.socket | None = None  # the current session's own (robot_net)
+        self._buf = bytearray(protocol.MAX_DATAGRAM + 1)  # one more: an oversize one shows
+        self._view = memoryview(self._buf)
         self.plant = None
         self.session: int | None = None  # the current session, bound to self.peer
         self.peer = None
@@ -126,6 +96,7 @@ class RobotServer:
         self.refused: Counter[str] = Counter()
         self._pending: dict[str, list] = {}  # since the last log line: key -> [count, text]
         self._last_log = 0.0
+        self._stopping = False
 
     @property
     def mode(self) -> str:
@@ -133,26 +104,50 @@ class RobotServer:
 
     def close(self) -> None:
         self._flush_log(force=True)
+        self._close_session_socket()
         self.sock.close()
 
+    def stop(self) -> None:
+        """Make serve return within its next 0.2 s (from another thread)."""
+        self._stopping = True
+
     def serve(self, duration: float | None = None) -> None:
-        """Answer requests (for `duration` seconds, default forever)."""
+        """Answer requests (for `duration` seconds, default forever, or until stop)."""
         end = None if duration is None else time.perf_counter() + duration
-        while end is None or time.perf_counter() < end:
+        while (end is None or time.perf_counter() < end) and not self._stopping:
             timeout = 0.2 if end is None else max(0.0, min(0.2, end - time.perf_counter()))
             if self.realtime and self.plant is not None:
                 self._advance()
                 timeout = min(timeout, max(0.0, self._next_tick() - time.perf_counter()))
-            ready, _, _ = select.select([self.sock], [], [], timeout)
-            if ready:
-                try:
-                    raw, client = self.sock.recvfrom(65536)
-                except OSError:
-                    continue  # e.g. an ICMP error queued for the socket
-                self._handle(raw, client)
+            session = self.session_sock
+            ready, _, _ = select.select([self.sock] if session is None else [session, self.sock],
+                                        [], [], timeout)  # fmt: skip
+            for sock in ready:  # the session's own socket first, then a batch of the others
+                if sock is self.session_sock or sock is self.sock:
+                    self._drain(sock)
             self._flush_log()
 
     # --- requests -------------------------------------------------------------------------------
+
+    def _drain(self, sock: socket.socket) -> None:
+        """Handle what `sock` holds, at most BATCH datagrams; those that cannot be a request of
+        this protocol (length, header: protocol.header_problem) are dropped before any MAC."""
+        buf, view = self._buf, self._view
+        for _ in range(BATCH):
+            try:
+                n, client = sock.recvfrom_into(buf)
+            except BlockingIOError:
+                return
+            except OSError:
+                if sock.fileno() == -1:
+                    return  # a new INIT on it replaced the session (and closed its socket)
+                continue  # e.g. an ICMP error queued for the socket
+            if protocol.header_problem(view[:n]):
+                self._drop("malformed", client)
+            elif buf[6] not in (protocol.INIT, protocol.STEP):
+                self._drop("not a request", client)  # never answer a reply (no loops)
+            else:
+                self._handle(bytes(view[:n]), client)
 
     def _handle(self, raw: bytes, client) -> None:
         """Check one datagram and answer it (or drop it); never raises."""
@@ -163,7 +158,7 @@ class RobotServer:
         except protocol.ProtocolError:
             return self._drop("malformed", client)
         if msg.kind not in (protocol.INIT, protocol.STEP):
-            return self._drop("not a request", client)  # never answer a reply (no loops)
+            return self._drop("not a request", client)
         try:
             handler = self._init if msg.kind == protocol.INIT else self._step
             reply = handler(msg, client)
@@ -205,6 +200,7 @@ class RobotServer:
             return self._refuse(msg, protocol.REFUSED, "the plant refused the parameters")
         self._forget_session()
         self.session, self.peer, self.plant = msg.session, client, plant
+        self.session_sock = robot_net.session_socket(self.sock, client)
         self.seen.add(msg.session)
         self.seen_order.append(msg.session)
         if len(self.seen_order) > SEEN_SESSIONS:
@@ -283,6 +279,12 @@ class RobotServer:
     def _forget_session(self) -> None:
         self.session, self.peer, self.plant = None, None, None
         self.last_seq, self.last_reply = 0, b""
+        self._close_session_socket()
+
+    def _close_session_socket(self) -> None:
+        if self.session_sock is not None:
+            self.session_sock.close()
+            self.session_sock = None
 
     # --- replies --------------------------------------------------------------------------------
 
@@ -309,8 +311,15 @@ class RobotServer:
     # --- counting and logging (at most one line a second) ---------------------------------------
 
     def _drop(self, reason: str, client) -> None:
+        """Count a dropped datagram; its line is written with the next log line (cheap enough
+        to be called for every datagram of a flood)."""
         self.dropped[reason] += 1
-        self._note(f"dropped a datagram ({reason}) from {client[0]}:{client[1]}", reason)
+        entry = self._pending.get(reason)
+        if entry is None:
+            self._pending[reason] = [1, (reason, client)]
+        else:
+            entry[0] += 1
+            entry[1] = (reason, client)
 
     def _note(self, text: str, key: str | None = None) -> None:
         """Log `text` now, or with its count in the next line if one went out < 1 s ago."""
@@ -323,8 +332,9 @@ class RobotServer:
         now = time.monotonic()
         if not self._pending or (now - self._last_log < 1.0 and not force):
             return
-        self.log("; ".join(t if n == 1 else f"{t} (and {n - 1} more like it)"
-                           for n, t in self._pending.values()))  # fmt: skip
+        texts = [(n, t if isinstance(t, str) else f"dropped a datagram ({t[0]}) from "
+                  f"{t[1][0]}:{t[1][1]}") for n, t in self._pending.values()]  # fmt: skip
+        self.log("; ".join(t if n == 1 else f"{t} (and {n - 1} more like it)" for n, t in texts))
         self._pending.clear()
         self._last_log = now
 

@@ -13,9 +13,10 @@ from bridge_model import protocol
 
 LISTENING = "robot: listening on"  # the robot's first line: LISTENING HOST:PORT (mode)
 # `impedance-cosim robot` in a child (not `-m impedance_cosim.cli`: that imports cli twice, and
-# an exception class of the second copy escapes main's handler as a traceback)
-ROBOT_COMMAND = [sys.executable, "-c", "import sys; from impedance_cosim.cli import main; "
-                 "sys.exit(main(sys.argv[1:]))", "robot"]  # fmt: skip
+# an exception class of the second copy escapes main's handler as a traceback); entry() makes a
+# signal while it starts one line and 128 + its number too
+ROBOT_COMMAND = [sys.executable, "-c", "from impedance_cosim.cli import entry; entry()",
+                 "robot"]  # fmt: skip
 
 
 def start_robot(
@@ -35,8 +36,12 @@ def start_robot(
     if token is not None:
         env[protocol.TOKEN_ENV] = token
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=stderr, text=True, env=env)
-    ready, _, _ = select.select([proc.stdout], [], [], timeout)
-    line = proc.stdout.readline() if ready else ""
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], timeout)
+        line = proc.stdout.readline() if ready else ""
+    except BaseException:  # e.g. Ctrl-C while it starts: no robot is left behind
+        stop_robot(proc)
+        raise
     if LISTENING not in line:
         stop_robot(proc)
         raise RobotStartError(

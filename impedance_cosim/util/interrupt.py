@@ -43,7 +43,11 @@ class Terminated(KeyboardInterrupt):
 
 
 class StopSignals:
-    """Record SIGINT/SIGTERM instead of raising (see module docstring)."""
+    """Record SIGINT/SIGTERM instead of raising (see module docstring). A Python FMU waiting in
+    the block finds the recorded signal through the installed handler (`records_signals`,
+    `signum`: impedance_cosim/fmi/host.py), so that its wait ends too."""
+
+    records_signals = True
 
     def __init__(self) -> None:
         self.signum: int | None = None

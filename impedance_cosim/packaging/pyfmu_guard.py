@@ -206,8 +206,8 @@ def guard_binaries(contents: dict[str, bytes], fmi_version: int) -> dict[str, by
             if (not name.startswith(f"binaries/{folder}/") or not name.endswith(toolchain.suffix)
                     or "/" in stem or stem.endswith(REAL)):  # fmt: skip
                 continue
-            if not toolchain.available():
-                _note_unguarded(toolchain)
+            if (problem := toolchain.problem()) is not None:  # absent or broken: probed once
+                _note_unguarded(toolchain, problem)
                 continue
             out[name] = _compile(toolchain, name, stem, fmi_version, headers)
             out[f"binaries/{folder}/{stem}{REAL}{toolchain.suffix}"] = contents[name]
@@ -217,11 +217,11 @@ def guard_binaries(contents: dict[str, bytes], fmi_version: int) -> dict[str, by
 _noted: set[str] = set()
 
 
-def _note_unguarded(toolchain: Toolchain) -> None:
+def _note_unguarded(toolchain: Toolchain, problem: str) -> None:
     """Say once per platform that its Python FMU binaries stay pythonfmu's alone."""
     if toolchain.platform not in _noted:
         _noted.add(toolchain.platform)
-        print(f"note: {toolchain.compiler} not found: the Python FMUs' binaries/"
+        print(f"note: {problem}: the Python FMUs' binaries/"
               f"{toolchain.platform} are pythonfmu's, unguarded (a call on a freed instance is"
               f" not refused; on Debian/Ubuntu: apt-get install {toolchain.debian_package})",
               file=sys.stderr)  # fmt: skip

@@ -21,7 +21,7 @@ import html5lib
 import matplotlib.image
 import pytest
 
-from impedance_cosim.apps import report
+from impedance_cosim.apps import html_page, report
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.provenance import file_sha256
 
@@ -359,8 +359,8 @@ def test_chromium_opens_the_report_and_decodes_every_image(paper_run, tmp_path):
     # A copy with a probe: the page's own policy, plus inline script for the probe only; an
     # image from a file beside it must be refused, the embedded ones decoded.
     text = (paper_run / "report.html").read_text(encoding="utf-8")
-    assert f'content="{report.CSP}"' in text
-    probe = text.replace(report.CSP, report.CSP + "; script-src 'unsafe-inline'").replace(
+    assert f'content="{html_page.CSP}"' in text
+    probe = text.replace(html_page.CSP, html_page.CSP + "; script-src 'unsafe-inline'").replace(
         "</body>",
         f'<img id="probe" alt="" src="{(paper_run / "fig1_position_force.png").as_uri()}">'
         "<script>addEventListener('load', () => { const all = [...document.images];"

@@ -6,23 +6,18 @@ maps and its table."""
 
 from __future__ import annotations
 
-import base64
 import csv
-import html
-import json
 import shlex
-import struct
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from impedance_cosim.apps.html_page import esc as _e
+from impedance_cosim.apps.html_page import fixed, page, plain, png_data_uri, table
 from impedance_cosim.apps.paper_claims import PAPER, PARAMETER_CLAIMS, Run
 
 REPORT_NAME = "report.html"
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-# The browser fetches nothing: images only from data: URIs, the one inline style sheet.
-CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
 MAX_TABLE_ROWS = 500  # a sweep's table in the page; the CSV has them all
 CAPTIONS = {
     "fig1_position_force.png": "Fig. 1: position and force tracking",
@@ -30,50 +25,6 @@ CAPTIONS = {
     "fig3_velocity_tracking.png": "Fig. 3: velocity tracking",
     "fig4_observer_vs_difference.png": "Fig. 4: observer vs numerical differentiation in the loop",
 }
-STYLE = """body{font:15px/1.45 system-ui,sans-serif;max-width:72rem;margin:1.5rem auto;
-padding:0 1rem;color:#222}h1{font-size:1.5rem}
-h2{font-size:1.2rem;border-bottom:1px solid #ccc;margin-top:2rem}
-table{border-collapse:collapse;margin:.5rem 0}td,th{border:1px solid #ccc;padding:.2rem .5rem;
-text-align:left;vertical-align:top}th{background:#f3f3f3}code,pre{font-size:13px}
-pre{white-space:pre-wrap;word-break:break-all;background:#f6f6f6;padding:.5rem}
-.ok{background:#e6f4e6;padding:.6rem;border-left:6px solid #2a2}
-.failed{background:#fbe7e7;padding:.6rem;border-left:6px solid #c22;font-weight:600}
-.diverged{background:#fdf3dc;padding:.6rem;border-left:6px solid #d90;font-weight:600}
-figure{margin:1rem 1rem 1rem 0;display:inline-block;vertical-align:top}
-img{max-width:100%;height:auto;border:1px solid #ddd}"""
-
-
-# --- HTML pieces ------------------------------------------------------------------------------
-
-
-def _e(value: Any) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    head = f"<thead><tr>{head}</tr></thead>" if any(header) else ""
-    body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table>{head}<tbody>{body}</tbody></table>"
-
-
-def _plain(value: Any) -> str:
-    """A cell value as text: numbers as they are, nested data as compact JSON."""
-    if isinstance(value, (dict, list, tuple)):
-        return json.dumps(value, default=str)
-    return "" if value is None else str(value)
-
-
-def png_data_uri(path: Path) -> tuple[str, int, int] | None:
-    """(data: URI, width, height) of a PNG file; None when it is missing or not a PNG."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError:
-        data = b""
-    if not data.startswith(PNG_SIGNATURE) or data[12:16] != b"IHDR" or len(data) < 24:
-        return None
-    width, height = struct.unpack(">II", data[16:24])
-    return "data:image/png;base64," + base64.b64encode(data).decode("ascii"), width, height
 
 
 def _figures(paths: Sequence[Path], none: str = "") -> str:
@@ -88,16 +39,6 @@ def _figures(paths: Sequence[Path], none: str = "") -> str:
             parts.append(f'<figure><img src="{uri}" alt="{_e(caption)}" width="{w}" height="{h}">'
                          f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
     return "".join(parts) or f"<p>{_e(none or 'No figures were made by this command.')}</p>"
-
-
-def _page(title: str, body: str) -> str:
-    return (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
-        f'<meta http-equiv="Content-Security-Policy" content="{CSP}">\n'
-        f"<title>{_e(title)}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
-        f"<h1>{_e(title)}</h1>\n{body}\n</body>\n</html>\n"
-    )
 
 
 def _write(path: Path, text: str, error: BaseException | None) -> Path | None:
@@ -208,7 +149,7 @@ def run_report(
     banner = _banner(kind, problems, record, kept, "command")
     body = _run_sections(record, figures, f"this command ({scenario})", "run.json",
                          "The columns of the CSV files that have a unit")  # fmt: skip
-    return _page(title, f'<p class="{kind}">{_e(banner)}</p>\n{body}')
+    return page(title, f'<p class="{kind}">{_e(banner)}</p>\n{body}')
 
 
 def result_report(record: Mapping[str, Any], figures: Sequence[Path] = ()) -> str:
@@ -230,7 +171,7 @@ def result_report(record: Mapping[str, Any], figures: Sequence[Path] = ()) -> st
     none = f"No figures: {'the run has no summary' if kind == 'ok' else 'the run did not finish'}."
     body = _run_sections(record, figures, f"this run ({scenario})", "Result.provenance", units,
                          none)  # fmt: skip
-    return _page(title, f'<p class="{kind}">{_e(banner)}</p>\n{body}')
+    return page(title, f'<p class="{kind}">{_e(banner)}</p>\n{body}')
 
 
 def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: str, source: str,
@@ -257,22 +198,23 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
         if diverged and c.measured not in PARAMETER_CLAIMS and c is not PAPER[-1]:
             measured = "not measured: the run diverged"
         rows.append((c.quantity, c.paper, c.source, measured or "not in this run"))
-    parts.append(_table(["", "the paper", "where", column], rows))
+    parts.append(table(["", "the paper", "where", column], rows))
     if main.get("summary"):
-        values = [(k, _plain(v)) for k, v in main["summary"].items()]
+        values = [(k, plain(v)) for k, v in main["summary"].items()]
         parts.append("<details><summary>Every value of the summary</summary>"
-                     f"{_table(['quantity', 'value'], values)}</details>")  # fmt: skip
+                     f"{table(['quantity', 'value'], values)}</details>")  # fmt: skip
 
     parts.append("<h2>Figures</h2>" + _figures(figures, no_figures))
 
     parts.append("<h2>Runs</h2>")
-    parts.append(_table(
+    parts.append(table(
         ["scenario", "status", "rows", "CSV", "algorithm", "step [s]", "stop [s]", "wall time [s]",
          "real-time factor", "overrides", "error"],
         [(str(r.get("scenario")) + (f" ({r['role']})" if r.get("role") else ""), r.get("status"),
-          r.get("rows", ""), r.get("csv", ""),
-          r.get("algorithm"), r.get("step_size"), r.get("stop_time"), r.get("wall_time_s", ""),
-          r.get("real_time_factor", ""), _plain(r.get("overrides") or ""), r.get("error") or "")
+          r.get("rows", ""), r.get("csv", ""), r.get("algorithm"), r.get("step_size"),
+          r.get("stop_time"), fixed(r.get("wall_time_s"), 2),
+          fixed(r.get("real_time_factor"), 1), plain(r.get("overrides") or ""),
+          r.get("error") or "")
          for r in runs]))  # fmt: skip
 
     parts.append(_provenance(record, runs, source))
@@ -281,7 +223,7 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
         found.update({k: v for k, v in r.get("units", {}).items() if k not in found})
     parts.append(f"<h2>Signals and units</h2><p>{_e(units)} (from the FMUs' model descriptions, "
                  f"as in {_e(source)}).</p>")  # fmt: skip
-    parts.append(_table(["signal", "unit"], sorted(found.items())) if found else "<p>None.</p>")
+    parts.append(table(["signal", "unit"], sorted(found.items())) if found else "<p>None.</p>")
     return "\n".join(parts)
 
 
@@ -295,26 +237,26 @@ def _provenance(record: Mapping[str, Any], runs: Sequence[Run], source: str) -> 
         ("system archive", system.get("ssp", "")),
         ("system archive sha256", system.get("sha256", "")),
         ("started (UTC)", record.get("started", "")),
-        ("wall time [s]", record.get("wall_time_s", "")),
+        ("wall time [s]", fixed(record.get("wall_time_s"), 2)),
         ("host", " ".join(str(v) for v in record.get("host", {}).values())),
     ]
-    parts = [f"<h2>Provenance</h2><p>As recorded in {_e(source)}.</p>", _table(["", ""], head)]
+    parts = [f"<h2>Provenance</h2><p>As recorded in {_e(source)}.</p>", table(["", ""], head)]
     fmus: dict[tuple, list[str]] = {}
     for r in runs:
         for comp, f in r.get("fmus", {}).items():
             key = (comp, f.get("file"), f.get("in_system_archive"), f.get("sha256"),
                    f.get("model"), f.get("fmi_version"), f.get("generation_tool"))  # fmt: skip
             fmus.setdefault(key, []).append(str(r.get("scenario")))
-    parts.append("<h3>FMU files</h3>" + _table(
+    parts.append("<h3>FMU files</h3>" + table(
         ["component", "file", "in the system archive", "sha256", "model", "FMI", "generated by",
          "runs"], [(*k, ", ".join(v)) for k, v in fmus.items()]))  # fmt: skip
     for r in runs:
-        values = [(f"{c}.{k}", _plain(v)) for c, p in r.get("parameters", {}).items()
+        values = [(f"{c}.{k}", plain(v)) for c, p in r.get("parameters", {}).items()
                   for k, v in p.items()]  # fmt: skip
         parts.append(f"<details><summary>Parameters in effect: {_e(r.get('scenario'))}</summary>"
-                     f"{_table(['parameter', 'value'], values)}</details>")  # fmt: skip
+                     f"{table(['parameter', 'value'], values)}</details>")  # fmt: skip
     versions = [(k, v or "not installed") for k, v in record.get("versions", {}).items()]
-    parts.append("<h3>Versions</h3>" + _table(["package", "version"], versions))
+    parts.append("<h3>Versions</h3>" + table(["package", "version"], versions))
     return "\n".join(parts)
 
 
@@ -366,9 +308,9 @@ def sweep_report(
     bad = sum(1 for r in rows if str(r.get("status", "")) not in ("ok", ""))
     summary = f"{len(rows)} runs, {len(rows) - bad} ok, {bad} not"
     parts = [f'<p class="{"failed" if bad else "ok"}">{_e(summary)}.</p>', "<h2>Provenance</h2>"]
-    info = [(k, shlex.join(v) if k == "command" and isinstance(v, list) else _plain(v))
+    info = [(k, shlex.join(v) if k == "command" and isinstance(v, list) else plain(v))
             for k, v in provenance.items()]  # fmt: skip
-    parts.append(_table(["", ""], info))
+    parts.append(table(["", ""], info))
     parts.append("<h2>Maps</h2>" + _figures(maps))
     columns: list[str] = []
     for r in rows:
@@ -378,8 +320,8 @@ def sweep_report(
     note = f"first {len(shown)} of {len(rows)} rows{where}" if len(shown) < len(rows) else (
         f"{len(rows)} rows{where}")  # fmt: skip
     parts.append(f"<h2>Table</h2><p>{_e(note)}.</p>")
-    parts.append(_table(columns, [[_plain(r.get(c)) for c in columns] for r in shown]))
-    return _page(title, "\n".join(parts))
+    parts.append(table(columns, [[plain(r.get(c)) for c in columns] for r in shown]))
+    return page(title, "\n".join(parts))
 
 
 def write_sweep_report(

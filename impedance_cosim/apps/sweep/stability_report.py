@@ -11,7 +11,11 @@ from pathlib import Path
 from typing import Any
 
 from impedance_cosim.apps import report
-from impedance_cosim.apps.report import REPORT_NAME, _e, _figures, _page, _plain, _table, _write
+from impedance_cosim.apps.html_page import esc as _e
+from impedance_cosim.apps.html_page import page as _page
+from impedance_cosim.apps.html_page import plain as _plain
+from impedance_cosim.apps.html_page import table as _table
+from impedance_cosim.apps.report import REPORT_NAME, _figures, _write
 from impedance_cosim.apps.sweep.stability_log import Record
 
 WHAT = {

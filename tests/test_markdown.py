@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -154,9 +155,21 @@ def workdir(tmp_path: Path, fmus: Path) -> Path:
 
 
 def run(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        argv, cwd=cwd, env=environment(), capture_output=True, text=True, timeout=TIMEOUT
-    )
+    """Run argv in its own process group, and end whatever of that group is left afterwards
+    (a block's background job, e.g. a robot, when a later command failed)."""
+    proc = subprocess.Popen(
+        argv, cwd=cwd, env=environment(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        out, err = proc.communicate(timeout=TIMEOUT)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate()
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
 
 
 def script(block: Block) -> str:

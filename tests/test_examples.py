@@ -4,7 +4,9 @@ kernel of this Python (paper scenario, summary, provenance, Fig. 1, a small swee
 from __future__ import annotations
 
 import json
+import re
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -71,3 +73,18 @@ def test_the_notebook_runs(ssp_path, tmp_path, kernel):
     page = check_page(work / "paper_scenario.html")
     assert len(page.images()) == 3
     assert "impedance_cosim.simulate: observer ok" in " ".join(page.text)
+
+
+def test_what_the_notebook_writes_is_ignored_by_git():
+    """Running the notebook in examples/ leaves its report page there: git ignores it, so it is
+    never an untracked file or committed by mistake."""
+    repo = NOTEBOOK.parents[1]
+    if shutil.which("git") is None or not (repo / ".git").exists():
+        pytest.skip("not a git checkout")
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    written = re.findall(r"\.report\(\"([^\"]+)\"\)", "".join(c.source for c in nb.cells))
+    assert written, "the notebook writes no report page any more: update this test"
+    for name in written:
+        path = NOTEBOOK.parent / name
+        p = subprocess.run(["git", "check-ignore", "-q", str(path)], cwd=repo)
+        assert p.returncode == 0, f"{path.relative_to(repo)} is not ignored by git"

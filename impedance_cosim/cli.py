@@ -47,6 +47,11 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures",
                        epilog=RUN_EXIT_STATUS)  # fmt: skip
     add_run_options(p)
+    p.add_argument(
+        "--list-parameters",
+        action="store_true",
+        help="list the names --set accepts, with the scenario's values, and exit",
+    )
     p.set_defaults(func=run_cmd.cmd_run)
     from impedance_cosim.apps.sweep import command as sweep_command
 

@@ -77,6 +77,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     ssp = Path(args.ssp) if args.ssp else DEFAULT_SSP
     ensure_built(args, ssp)
     system = args.system = read_ssp(ssp)  # closed by _dispatch()
+    if getattr(args, "list_parameters", False):
+        from impedance_cosim.apps.parameters import parameter_lines
+
+        print("\n".join(parameter_lines(system, args.scenario)))
+        return 0
     pair = [] if args.no_figures else ["observer", "difference"]
     for scenario in [args.scenario, *(s for s in pair if s in system.parameter_sets)]:
         _master(args, system, overrides, scenario, args.algorithm)

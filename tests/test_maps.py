@@ -49,3 +49,15 @@ def test_a_map_is_at_least_600_by_400_px_and_titled_in_words(
     assert width >= 600 and height >= 400, (width, height)
     if len(axes) == 2:
         assert any("settled contact force (N)" in t for t in titles), titles
+
+
+@pytest.mark.parametrize("axes", [["controller.K"], ["controller.K", "system.rate"]])
+def test_a_metric_no_run_has_is_a_map_that_says_so(tmp_path: Path, axes: list[str]) -> None:
+    """A random sweep over a log-spaced axis whose runs all end before contact: no value of the
+    settled force anywhere (matplotlib refused to log-scale an empty axis: exit 2)."""
+    rows = [{"controller.K": k, "system.rate": 200 + 40 * i, "status": "ok",
+             "settled_force_N": None}
+            for i, k in enumerate((5.0, 20.0, 80.0, 300.0, 500.0))]  # fmt: skip
+    png = tmp_path / "empty.png"
+    plot_map(rows, axes, "settled_force_N", png, mode="random")
+    assert mpimg.imread(png).shape[1] >= 600

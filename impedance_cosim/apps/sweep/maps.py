@@ -121,7 +121,10 @@ def plot_map(
             if bad:
                 ax.legend(fontsize=8)
         numeric = [r[x] for r in rows if isinstance(r[x], int | float) and r[x] > 0]
-        if numeric and len(numeric) == len(rows) and max(numeric) / min(numeric) > 20:
+        if not ok:  # nothing to draw (e.g. no run reached the wall before its stop time)
+            ax.text(0.5, 0.5, f"no run has a value of this metric ({len(rows)} runs)",
+                    ha="center", va="center", transform=ax.transAxes)  # fmt: skip
+        elif numeric and len(numeric) == len(rows) and max(numeric) / min(numeric) > 20:
             ax.set_xscale("log")
         ax.set_xlabel(x)
         ax.set_title(title, fontsize=10)

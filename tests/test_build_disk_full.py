@@ -67,8 +67,8 @@ def test_build_onto_a_full_disk_leaves_no_archive(full_disk):
 
 
 def test_dist_onto_a_full_disk_leaves_no_bundle(full_disk, tmp_path):
-    done = subprocess.run([*CLI, "dist", str(full_disk / "dist"), "--out", str(tmp_path / "fmus")],
-                          capture_output=True, text=True, timeout=900)  # fmt: skip
+    argv = [*CLI, "dist", "--out", str(full_disk / "dist"), "--fmus", str(tmp_path / "fmus")]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=900)
     line = one_error(done, "dist")
     assert f"cannot write {NAME}.zip in {full_disk / 'dist'}: No space left on device" in line
     assert leftovers(full_disk) == []

@@ -31,8 +31,9 @@ def two_builds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
             "-m",
             "impedance_cosim.cli",
             "dist",
-            str(b / "dist"),
             "--out",
+            str(b / "dist"),
+            "--fmus",
             str(b / "fmus"),
         ],  # fmt: skip
         capture_output=True,
@@ -121,7 +122,7 @@ def test_incomplete_bundle_refused(tmp_path: Path):
 
 def test_dist_without_a_compiler_says_so(tmp_path: Path, monkeypatch, capsys):
     monkeypatch.setenv("CC", "no-such-compiler-here")
-    assert main(["dist", str(tmp_path / "dist"), "--out", str(tmp_path / "fmus")]) == 2
+    assert main(["dist", "--out", str(tmp_path / "dist"), "--fmus", str(tmp_path / "fmus")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("impedance-cosim dist: error: the bundle is incomplete, missing")
     assert "C compiler" in err[-1]
@@ -131,7 +132,7 @@ def test_dist_without_a_compiler_says_so(tmp_path: Path, monkeypatch, capsys):
 def test_dist_into_a_file_says_so(tmp_path: Path, capsys):
     blocker = tmp_path / "not_a_folder"
     blocker.write_text("x")
-    assert main(["dist", str(blocker / "dist"), "--out", str(tmp_path / "fmus")]) == 2
+    assert main(["dist", "--out", str(blocker / "dist"), "--fmus", str(tmp_path / "fmus")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("impedance-cosim dist: error: cannot write"), err
     assert "not_a_folder" in err[-1] and "Traceback" not in "".join(err)

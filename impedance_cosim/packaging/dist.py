@@ -162,11 +162,11 @@ def cmd_dist(args: argparse.Namespace) -> int:
     """`impedance-cosim dist`: build everything and write the bundle."""
     started = time.perf_counter()
     try:
-        path = build_dist(Path(args.dir), Path(args.out))
+        path = build_dist(Path(args.out), Path(args.fmus))
     except ArchiveWriteError:  # a full disk: a failed run (exit 1), the line names the file
         raise
     except OSError as exc:  # an unwritable or misnamed folder: one line, not a traceback
-        where = exc.filename or args.dir
+        where = exc.filename or args.out
         raise ValueError(f"cannot write {where}: {exc.strerror or exc}") from None
     print(f"wrote {path}")
     print(summary(path, time.perf_counter() - started))
@@ -187,7 +187,8 @@ def summary(path: Path, seconds: float) -> str:
 def add_parser(sub) -> None:
     """The `dist` subcommand."""
     p = sub.add_parser("dist", help="build everything and zip the distribution bundle")
-    p.add_argument("dir", nargs="?", default="dist", help="where the bundle goes (default dist/)")
-    p.add_argument("--out", default=str(DEFAULT_OUT),
+    p.add_argument("--out", default="dist", help="where the bundle goes (default dist/), as"
+                   " every command's --out names the folder it writes its results to")  # fmt: skip
+    p.add_argument("--fmus", default=str(DEFAULT_OUT),
                    help="where the FMUs are built (default: the repository's fmus/)")  # fmt: skip
     p.set_defaults(func=cmd_dist)

@@ -23,11 +23,22 @@ from impedance_cosim.apps import sweep
 from impedance_cosim.apps.sweep.table import SweepTable, read_table
 from impedance_cosim.cli import main
 
+# A C exit handler that aborts: a process that leaves through the C library's exit(), which runs
+# the loaded libraries' destructors (pythonfmu 0.7's corrupts the heap: exit -6 in some runs),
+# dies with SIGABRT every time; one that leaves as fmu.exit_process does (os._exit after Python's
+# own exit work, while an FMU library is loaded) exits with its status.
+ABORT_AT_C_EXIT = (
+    "import ctypes, runpy, sys; libc = ctypes.CDLL(None); "
+    "libc.__cxa_atexit(ctypes.cast(libc.abort, ctypes.c_void_p), None, None); "
+    "runpy.run_module('impedance_cosim.cli', run_name='__main__')"
+)
 
-def sweep_command(*args: str) -> list[str]:
-    """The sweep command in a subprocess; stderr holds only errors (no progress lines)."""
-    return [sys.executable, "-m", "impedance_cosim.cli", "sweep", "--no-plots", "--no-progress",
-            *args]  # fmt: skip
+
+def sweep_command(*args: str, abort_at_c_exit: bool = False) -> list[str]:
+    """The sweep command in a subprocess; stderr holds only errors (no progress lines).
+    abort_at_c_exit: with ABORT_AT_C_EXIT (for a process that loads FMUs itself: --serial)."""
+    start = ["-c", ABORT_AT_C_EXIT] if abort_at_c_exit else ["-m", "impedance_cosim.cli"]
+    return [sys.executable, *start, "sweep", "--no-plots", "--no-progress", *args]
 
 
 def data_rows(table: Path) -> int:
@@ -100,11 +111,13 @@ def python_reference(ssp_path, tmp_path_factory) -> dict[int, dict]:
 def test_signal_stops_a_serial_sweep_keeps_rows_and_resume_finishes_it(
     ssp_path, tmp_path, python_reference, signum
 ):
-    """Python FMUs: on main a Ctrl-C inside an FMU became a failed row and the sweep went on."""
+    """Python FMUs: on main a Ctrl-C inside an FMU became a failed row and the sweep went on.
+    Both processes load Python FMUs and must leave without the C destructors (ABORT_AT_C_EXIT):
+    before, they ran pythonfmu's at exit, which corrupted the heap (exit -6) in some runs."""
     out = tmp_path / "o"
     args = ["--serial", "--ssp", str(ssp_path), "--stop", "3", "--out", str(out), *PY_GRID]
-    proc = subprocess.Popen(sweep_command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)  # fmt: skip
+    proc = subprocess.Popen(sweep_command(*args, abort_at_c_exit=True), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
     wait_rows(proc, out / "sweep.csv", 1)
     proc.send_signal(signum)
     code, _out, err = finish(proc)
@@ -112,7 +125,8 @@ def test_signal_stops_a_serial_sweep_keeps_rows_and_resume_finishes_it(
     for row in kept:  # every kept row is a finished run, equal to the uninterrupted one
         assert strip([row]) == {row["run"]: python_reference[row["run"]]}
 
-    resumed = subprocess.run(sweep_command(*args, "--resume"), capture_output=True, text=True)
+    resume = sweep_command(*args, "--resume", abort_at_c_exit=True)
+    resumed = subprocess.run(resume, capture_output=True, text=True)
     assert resumed.returncode == 0, resumed.stderr
     assert f"({len(kept)} kept from the table)" in resumed.stdout
     rows = read_table(out / "sweep.csv")

@@ -164,13 +164,21 @@ def worker_processes(proc: subprocess.Popen) -> list[psutil.Process]:
     return found
 
 
-def wait_workers(proc: subprocess.Popen, count: int, timeout: float = 60) -> None:
-    """Wait until the sweep has forked its LocalCluster's `count` worker processes."""
-    end = time.monotonic() + timeout
-    while len(worker_processes(proc)) < count:
-        assert proc.poll() is None, f"the sweep ended ({proc.returncode}) before its workers"
-        assert time.monotonic() < end, f"no {count} workers after {timeout} s"
-        time.sleep(0.005)
+def wait_line(proc: subprocess.Popen, text: str, timeout: float = 120) -> None:
+    """Wait until the command has printed a line starting with `text` on stdout (the event it
+    reports itself); fail if it ends or the time is up first. Reads the pipe's descriptor only,
+    so proc.communicate() still gets the rest."""
+    import os
+    import select
+
+    buffer, end = b"", time.monotonic() + timeout
+    fd = proc.stdout.fileno()
+    while not any(line.startswith(text.encode()) for line in buffer.split(b"\n")[:-1]):
+        assert time.monotonic() < end, f"no line {text!r} after {timeout} s: {buffer!r}"
+        if select.select([fd], [], [], 0.1)[0]:
+            chunk = os.read(fd, 4096)
+            assert chunk, f"the command ended ({proc.wait()}) before {text!r}: {buffer!r}"
+            buffer += chunk
 
 
 def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_grid, native_reference, tmp_path):
@@ -209,8 +217,8 @@ def test_a_signal_during_a_dask_sweep_is_our_one_line(
     proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *native_grid),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     table = out / "sweep.csv"
-    if when == "cluster starting":
-        wait_workers(proc, 1)
+    if when == "cluster starting":  # reported once our handlers are in place, then it starts
+        wait_line(proc, "dask: starting a LocalCluster of 2 worker processes")
     else:
         wait_rows(proc, table, 3)
     proc.send_signal(signum)
@@ -440,6 +448,7 @@ BAD = [
     (["--random", "0"], "--random must be 1..100000"),
     (["--random", "1000000000"], "--random must be 1..100000"),
     (["--workers", "0"], "--workers must be >= 1"),
+    (["--workers", "100000"], "--workers 100000 is more than 4 per core of this machine"),
     (["--connect-timeout", "0"], "--connect-timeout must be"),
     (["--connect-timeout", "nan"], "--connect-timeout must be"),
     (["--plot", "bogus"], "unknown metric 'bogus'"),
@@ -482,6 +491,14 @@ def test_bad_sweep_input_is_one_line(
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_local_cluster_is_no_bigger_than_the_runs(native_ssp, tmp_path, capsys):
+    """--workers 4 for 2 runs starts 2 worker processes (said on stdout)."""
+    args = ["sweep", "--no-plots", "--no-progress", "--no-report", "--ssp", str(native_ssp)]
+    grid = ["--stop", "0.5", "--grid", "controller.K=10,20", "--out", str(tmp_path / "o")]
+    assert main([*args, "--workers", "4", *grid]) == 0
+    assert "dask: starting a LocalCluster of 2 worker processes" in capsys.readouterr().out
 
 
 def test_out_naming_a_file_is_one_line(native_ssp, tmp_path, capsys):

@@ -20,7 +20,7 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from impedance_cosim.apps.sweep.plan import SweepError
+from impedance_cosim.apps.sweep.plan import SweepError, cores, workers_problem
 
 
 class IgnoreSigint(WorkerPlugin):
@@ -161,6 +161,16 @@ def _remote(stack: contextlib.ExitStack, scheduler: str, timeout: float) -> Any:
     return stack.enter_context(client)
 
 
+def local_workers(workers: int | None, runs: int | None = None) -> int:
+    """The LocalCluster's size: `workers` (this machine's cores by default), no more than the
+    runs to do; SweepError beyond 4 workers per core (see plan.workers_problem)."""
+    problem = workers_problem(workers)
+    if problem:
+        raise SweepError(problem)
+    n = workers or cores()
+    return max(1, min(n, runs)) if runs is not None else n
+
+
 def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
     """A LocalCluster and its Client, closed by stack. Its log level is CRITICAL (forked workers
     inherit it): dask's ERROR lines are races of its own shutdown (e.g. a worker's heartbeat
@@ -170,7 +180,7 @@ def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
     import dask
     from distributed import Client, LocalCluster
 
-    n = workers or os.cpu_count() or 1
+    n = local_workers(workers)
     method = {"distributed.worker.multiprocessing-method": START_METHOD}
     stack.enter_context(dask.config.set({**QUIET_WORKERS, **method}))
     cluster = stack.enter_context(

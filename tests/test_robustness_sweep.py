@@ -204,6 +204,58 @@ def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_grid, native_refere
     assert strip(read_table(table)) == native_reference
 
 
+def running_worker(proc: subprocess.Popen, timeout: float = 120) -> psutil.Process:
+    """A worker of the sweep that has started running: an FMU's library is loaded in it (a
+    task's first run reads the archive and loads the FMUs), read from /proc/<pid>/maps."""
+    end = time.monotonic() + timeout
+    while True:
+        assert proc.poll() is None, f"the sweep ended ({proc.returncode}) before a worker ran"
+        assert time.monotonic() < end, f"no worker ran an FMU after {timeout} s"
+        for worker in worker_processes(proc):
+            try:
+                if "/binaries/" in Path(f"/proc/{worker.pid}/maps").read_text():
+                    return worker
+            except OSError:  # it just ended
+                pass
+        time.sleep(0.002)
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").is_file(), reason="needs /proc")
+def test_a_worker_killed_in_its_first_run_costs_no_row(native_grid, native_reference, tmp_path):
+    """SIGKILL to a worker as soon as it runs: its runs go to the other worker, every row is the
+    serial sweep's, exit 0. On main the archive was broadcast to every worker and each prepared
+    there (client.run): a worker killed then failed the sweep (`Stream is closed`, no row)."""
+    out = tmp_path / "o"
+    proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *native_grid),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    running_worker(proc).kill()
+    code, _out, err = finish(proc)
+    assert code == 0 and err == "", err
+    assert strip(read_table(out / "sweep.csv")) == native_reference
+
+
+@pytest.mark.parametrize("signum", [None, signal.SIGINT])
+def test_a_dask_sweep_leaves_nothing_in_tmpdir(native_grid, tmp_path, signum):
+    """The workers' extractions (impcosim_fmu_*, impcosim_ssp_*) and dask's scratch folder are
+    in a folder of the sweep's, removed once the cluster is closed, also after Ctrl-C; on main
+    every dask sweep left them in TMPDIR."""
+    import os
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    out = tmp_path / "o"
+    env = {**os.environ, "TMPDIR": str(tmp)}
+    proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *native_grid),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)  # fmt: skip
+    if signum is not None:
+        wait_rows(proc, out / "sweep.csv", 3)
+        proc.send_signal(signum)
+    code, _out, err = finish(proc)
+    assert code == (0 if signum is None else 128 + signum), err
+    assert sorted(p.name for p in tmp.iterdir()) == []
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("when", ["cluster starting", "runs under way"])
 def test_a_signal_during_a_dask_sweep_is_our_one_line(

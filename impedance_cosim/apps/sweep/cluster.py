@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import socket
 import sys
+import tempfile
 import threading
 import time
 from typing import Any
@@ -23,14 +25,22 @@ from distributed.diagnostics.plugin import WorkerPlugin
 from impedance_cosim.apps.sweep.plan import SweepError, cores, workers_problem
 
 
-class IgnoreSigint(WorkerPlugin):
-    """Registered on a LocalCluster's workers (also on a worker restarted after a crash)."""
+class LocalWorkerSetup(WorkerPlugin):
+    """Registered on a LocalCluster's workers (also on a worker restarted after a crash), before
+    any task: SIGINT ignored, and their temporary files (FMU and archive extractions) in the
+    sweep's own folder, which the sweep removes once the cluster is closed: a worker leaves
+    without Python's exit work (os._exit, or killed), so its own cleanup never runs."""
 
-    name = "impedance-cosim-ignore-sigint"
+    name = "impedance-cosim-local-worker"
+
+    def __init__(self, scratch: str) -> None:
+        self.scratch = scratch
 
     def setup(self, worker) -> None:
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+        os.environ["TMPDIR"] = self.scratch
+        tempfile.tempdir = self.scratch
 
 
 def check_scheduler(address: str, timeout: float = 3.0) -> None:
@@ -181,8 +191,11 @@ def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
     from distributed import Client, LocalCluster
 
     n = local_workers(workers)
-    method = {"distributed.worker.multiprocessing-method": START_METHOD}
-    stack.enter_context(dask.config.set({**QUIET_WORKERS, **method}))
+    scratch = tempfile.mkdtemp(prefix="impcosim_dask_")  # dask's and the workers' temporary files
+    stack.callback(shutil.rmtree, scratch, ignore_errors=True)  # last: after the cluster closed
+    where = {"distributed.worker.multiprocessing-method": START_METHOD,
+             "temporary-directory": scratch}  # fmt: skip
+    stack.enter_context(dask.config.set({**QUIET_WORKERS, **where}))
     cluster = stack.enter_context(
         LocalCluster(
             n_workers=n,
@@ -193,5 +206,5 @@ def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
         )
     )
     client = stack.enter_context(Client(cluster))
-    client.register_plugin(IgnoreSigint())  # Ctrl-C is the main process's
+    client.register_plugin(LocalWorkerSetup(scratch))  # before any task of ours
     return client

@@ -601,3 +601,25 @@ def test_local_workers_hold_no_lock_of_ours_and_leave_signals_to_us(tmp_path):
         signal.signal(signal.SIGTERM, previous)
     assert not [f for f in files if f.endswith((LOCK_NAME, "sweep.csv.lock"))], files
     assert sigint == str(signal.SIG_IGN) and sigterm == str(signal.SIG_DFL)
+
+
+@pytest.mark.parametrize("outcome", ["passed", "failed"])
+def test_the_test_session_leaves_without_the_fmu_destructors(tmp_path, outcome):
+    """A pytest session with an FMU library loaded (simulated: one left after fmi2Fatal) leaves
+    with its own status and without the C destructors (tests/conftest.py: pytest_unconfigure),
+    as the command does: before, a suite that passed could die at exit with SIGABRT."""
+    test = tmp_path / "test_one.py"
+    test.write_text(
+        "from impedance_cosim.cosim import fmu\n\n\ndef test_one():\n"
+        f"    fmu._leaked_libraries.append('x')\n    assert {outcome == 'passed'}\n"
+    )
+    tests = Path(__file__).parent
+    code = ABORT_AT_C_EXIT.replace(
+        "runpy.run_module('impedance_cosim.cli', run_name='__main__')",
+        f"sys.path.insert(0, {str(tests)!r}); import pytest; "
+        f"sys.exit(pytest.main(['-q', '-p', 'no:cacheprovider', '-p', 'conftest', {str(test)!r}]))",
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=300)  # fmt: skip
+    assert done.returncode == (0 if outcome == "passed" else 1), done.stdout + done.stderr
+    assert f"1 {outcome}" in done.stdout

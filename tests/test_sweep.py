@@ -197,7 +197,7 @@ def test_unreachable_scheduler_fails_fast(native_ssp, tmp_path, capsys, no_clust
             str(tmp_path / "o"),
         ]
     )
-    assert code == 2 and time.perf_counter() - started < 3.0
+    assert code == 2 and time.perf_counter() - started < 60  # a hang, not a speed: generous
     err = capsys.readouterr().err
     assert "cannot reach the dask scheduler at tcp://127.0.0.1:1" in err
     assert not (tmp_path / "o").exists()
@@ -223,3 +223,40 @@ def test_each_table_records_how_it_was_made(native_ssp, tmp_path):
     assert record["plan"] == json.loads((out / "sweep.plan.json").read_text())
     assert record["plan"]["ssp_sha256"] == file_sha256(native_ssp)
     assert record["versions"]["dask"] and record["wall_time_s"] > 0
+
+
+@pytest.mark.parametrize("where", ["during a run", "between runs"])
+def test_an_interrupted_api_sweep_keeps_its_finished_results(native_ssp, monkeypatch, where):
+    """Ctrl-C in the third of four runs: RunInterrupted carries the two finished Results (on
+    main only the interrupted run's) and the third's rows so far; Ctrl-C while the third is set
+    up (outside the master's run): it runs whole, the sweep stops before the fourth."""
+    import signal
+
+    import impedance_cosim as ic
+    from impedance_cosim.util.interrupt import RunInterrupted
+
+    calls = {"n": 0}
+    original = Master._run if where == "during a run" else Master.__init__
+
+    def third_gets_sigint(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == (3 if where == "during a run" else 4 + 3):  # 4 checks, then the runs
+            signal.raise_signal(signal.SIGINT)  # recorded; taken at the next check
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Master, "_run" if where == "during a run" else "__init__",
+                        third_gets_sigint)  # fmt: skip
+    with pytest.raises(RunInterrupted) as caught:
+        ic.sweep("controller.K", [10, 20, 30, 40], ssp=native_ssp, stop_time=1.0)
+    exc = caught.value
+    finished = (10, 20) if where == "during a run" else (10, 20, 30)
+    assert [r.ok for r in exc.results] == [True] * len(finished)
+    assert [r.provenance["call"] for r in exc.results] == [
+        f"simulate('observer', ssp={str(native_ssp)!r}, stop_time=1.0, "
+        f"overrides={{'controller.K': {k}}})" for k in finished
+    ]  # fmt: skip
+    assert f"{len(finished)} of 4 runs finished" in str(exc)
+    if where == "during a run":
+        assert exc.result is not None and 0 < len(exc.result.data) < 401
+    else:
+        assert exc.result is None

@@ -27,13 +27,15 @@ def signal_name(signum: int) -> str:
 
 
 class RunInterrupted(KeyboardInterrupt):
-    """A run stopped by a signal; `result` holds the rows computed before it stopped."""
+    """A run stopped by a signal; `result` holds the rows computed before it stopped, `results`
+    the runs of a sweep that finished before it (api.sweep; empty otherwise)."""
 
-    def __init__(self, message: str, signum: int, result: Any = None) -> None:
+    def __init__(self, message: str, signum: int, result: Any = None, results: Any = ()) -> None:
         super().__init__(message)
         self.message = message
         self.signum = signum
         self.result = result
+        self.results = list(results)
 
 
 class Terminated(KeyboardInterrupt):

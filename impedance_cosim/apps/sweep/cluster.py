@@ -11,26 +11,36 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import socket
 import sys
+import tempfile
 import threading
 import time
 from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from impedance_cosim.apps.sweep.plan import SweepError
+from impedance_cosim.apps.sweep.plan import SweepError, cores, workers_problem
 
 
-class IgnoreSigint(WorkerPlugin):
-    """Registered on a LocalCluster's workers (also on a worker restarted after a crash)."""
+class LocalWorkerSetup(WorkerPlugin):
+    """Registered on a LocalCluster's workers (also on a worker restarted after a crash), before
+    any task: SIGINT ignored, and their temporary files (FMU and archive extractions) in the
+    sweep's own folder, which the sweep removes once the cluster is closed: a worker leaves
+    without Python's exit work (os._exit, or killed), so its own cleanup never runs."""
 
-    name = "impedance-cosim-ignore-sigint"
+    name = "impedance-cosim-local-worker"
+
+    def __init__(self, scratch: str) -> None:
+        self.scratch = scratch
 
     def setup(self, worker) -> None:
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+        os.environ["TMPDIR"] = self.scratch
+        tempfile.tempdir = self.scratch
 
 
 def check_scheduler(address: str, timeout: float = 3.0) -> None:
@@ -161,6 +171,16 @@ def _remote(stack: contextlib.ExitStack, scheduler: str, timeout: float) -> Any:
     return stack.enter_context(client)
 
 
+def local_workers(workers: int | None, runs: int | None = None) -> int:
+    """The LocalCluster's size: `workers` (this machine's cores by default), no more than the
+    runs to do; SweepError beyond 4 workers per core (see plan.workers_problem)."""
+    problem = workers_problem(workers)
+    if problem:
+        raise SweepError(problem)
+    n = workers or cores()
+    return max(1, min(n, runs)) if runs is not None else n
+
+
 def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
     """A LocalCluster and its Client, closed by stack. Its log level is CRITICAL (forked workers
     inherit it): dask's ERROR lines are races of its own shutdown (e.g. a worker's heartbeat
@@ -170,18 +190,25 @@ def _local(stack: contextlib.ExitStack, workers: int | None) -> Any:
     import dask
     from distributed import Client, LocalCluster
 
-    n = workers or os.cpu_count() or 1
-    method = {"distributed.worker.multiprocessing-method": START_METHOD}
-    stack.enter_context(dask.config.set({**QUIET_WORKERS, **method}))
-    cluster = stack.enter_context(
-        LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=":0",
-            silence_logs=logging.CRITICAL,
-        )
-    )
+    n = local_workers(workers)
+    scratch = tempfile.mkdtemp(prefix="impcosim_dask_")  # dask's and the workers' temporary files
+    stack.callback(shutil.rmtree, scratch, ignore_errors=True)  # last: after the cluster closed
+    where = {"distributed.worker.multiprocessing-method": START_METHOD,
+             "temporary-directory": scratch}  # fmt: skip
+    stack.enter_context(dask.config.set({**QUIET_WORKERS, **where}))
+    options = {"threads_per_worker": 1, "processes": True, "dashboard_address": ":0"}
+    for attempt in (1, 2):  # a worker killed while the cluster starts fails it: start again once
+        try:
+            cluster = LocalCluster(n_workers=n, silence_logs=logging.CRITICAL, **options)
+            break
+        except RuntimeError:  # "Nanny failed to start"
+            if attempt == 2:
+                raise
+    stack.enter_context(cluster)
     client = stack.enter_context(Client(cluster))
-    client.register_plugin(IgnoreSigint())  # Ctrl-C is the main process's
+    setup = LocalWorkerSetup(scratch)  # before any task of ours
+    try:
+        client.register_plugin(setup)
+    except Exception:  # noqa: BLE001 (a worker lost in the broadcast: dask keeps the plugin for
+        client.register_plugin(setup, idempotent=False)  # workers (re)started; again for the rest)
     return client

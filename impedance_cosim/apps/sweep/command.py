@@ -28,6 +28,7 @@ from impedance_cosim.apps.sweep.plan import (
     known_parameters,
     parse_axis,
     plan_sweep,
+    workers_problem,
 )
 from impedance_cosim.apps.sweep.study import STUDY, run_study
 from impedance_cosim.apps.sweep.table import open_table
@@ -157,8 +158,8 @@ def stop_on_signals() -> Iterator[None]:
 
 def _check_options(args: argparse.Namespace) -> None:
     """SweepError for an option value that cannot work, before anything is read or started."""
-    if args.workers is not None and args.workers < 1:
-        raise SweepError(f"--workers must be >= 1 (got {args.workers})")
+    if workers_problem(args.workers):
+        raise SweepError(workers_problem(args.workers))
     if args.scheduler and args.workers:
         raise SweepError("--workers is for the LocalCluster; a --scheduler has its own workers")
     if not (math.isfinite(args.connect_timeout) and 0 < args.connect_timeout <= 600):
@@ -273,10 +274,17 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
     progress = not args.no_progress
     out = Path(args.out)
 
-    def client():
-        from impedance_cosim.apps.sweep.cluster import dask_client
+    def client(runs: int | None = None):
+        """The dask client, said on stdout first (the first sign of the cluster, reported after
+        our signal handlers are in place); a LocalCluster of at most as many workers as runs."""
+        from impedance_cosim.apps.sweep.cluster import dask_client, local_workers
 
-        return dask_client(args.scheduler, args.workers, args.connect_timeout)
+        if args.scheduler:
+            print(f"dask: the scheduler at {args.scheduler}", flush=True)
+            return dask_client(args.scheduler, None, args.connect_timeout)
+        n = local_workers(args.workers, runs)
+        print(f"dask: starting a LocalCluster of {n} worker processes", flush=True)
+        return dask_client(None, n, args.connect_timeout)
 
     factory = None if args.serial else client
     if args.study is not None:
@@ -314,7 +322,7 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
         kept = len(table.done)
         idle = len(table.done) == len(plan.points) or not factory
         with (
-            contextlib.nullcontext() if idle else factory() as c,
+            contextlib.nullcontext() if idle else factory(len(plan.points) - kept) as c,
             RunProgress(len(plan.points) - kept, progress) as tick,
         ):
             rows = run_plan(plan, table, c, tick)

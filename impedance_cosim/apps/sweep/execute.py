@@ -15,16 +15,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 from impedance_cosim.apps.sweep.metrics import METRICS
 from impedance_cosim.apps.sweep.plan import Plan, archive_payload, master_arguments
-from impedance_cosim.apps.sweep.worker import (
-    RunInterruptedError,
-    prepare_worker,
-    run_batch,
-    run_point,
-)
+from impedance_cosim.apps.sweep.worker import RunInterruptedError, run_batch, run_point
 from impedance_cosim.util.progress import Progress
 
 TARGET_S = 0.3  # aimed wall time of one task
@@ -117,6 +113,23 @@ class Batcher:
         return batch
 
 
+def archive_on_workers(client: Any, ssp: Path) -> tuple[Any, str]:
+    """(payload for the tasks, digest) of the archive: its path for a LocalCluster (workers on
+    this machine read it, each checks the digest), else its bytes scattered to every worker (a
+    worker lost during the broadcast: sent again to those left). No call that needs every
+    worker (client.run): a worker killed in it failed the whole sweep ("Stream is closed")."""
+    data, digest = archive_payload(ssp)
+    if getattr(client, "cluster", None) is not None:
+        return str(Path(ssp).resolve()), digest
+    for attempt in range(3):
+        try:
+            return client.scatter(data, broadcast=True, hash=False), digest
+        except Exception:  # noqa: BLE001 (a closed stream: which errors dask raises varies)
+            if attempt == 2:
+                raise
+    raise AssertionError("unreachable")
+
+
 def finished_tasks() -> Any:
     """A stream of (future, result) as dask tasks finish (add futures to it), the results fetched
     by dask's own thread: the caller never waits inside a dask call, where a Ctrl-C would leave
@@ -160,9 +173,7 @@ def run_dask(
     from concurrent.futures import CancelledError
 
     order = list(range(len(plan.points)) if indices is None else indices)
-    data, digest = archive_payload(plan.ssp)
-    payload = client.scatter(data, broadcast=True, hash=False)
-    client.run(prepare_worker, data, digest)  # every worker prepares the system once
+    payload, digest = archive_on_workers(client, plan.ssp)
     workers = len(client.scheduler_info().get("workers", {})) or 1
     batcher = Batcher({i: steps(plan.points[i], plan.options) for i in order}, workers, target_s)
     singles: list[int] = []  # points of failed batches, run again one per task

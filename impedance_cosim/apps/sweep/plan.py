@@ -18,6 +18,7 @@ import difflib
 import hashlib
 import itertools
 import math
+import os
 import random
 import re
 import sys
@@ -54,6 +55,31 @@ MAX_RUNS = 100_000  # planning alone configures one Master per run (~3 ms each)
 
 class SweepError(ValueError):
     """Bad sweep input (unknown parameter, empty grid, unreachable scheduler...): one line."""
+
+
+def cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+WORKERS_PER_CORE = 4  # LocalCluster workers beyond 4 per core only slow the runs down
+
+
+def workers_problem(workers: int | None) -> str | None:
+    """Why --workers cannot be used (one line), or None: at least 1, at most 4 per core (10**5
+    workers started one process each for minutes, silently, deaf to SIGTERM)."""
+    if workers is None:
+        return None
+    if workers < 1:
+        return f"--workers must be >= 1 (got {workers})"
+    limit = WORKERS_PER_CORE * cores()
+    if workers > limit:
+        return (f"--workers {workers} is more than {WORKERS_PER_CORE} per core of this machine "
+                f"({cores()} cores): at most {limit}")  # fmt: skip
+    return None
 
 
 @dataclass

@@ -18,9 +18,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.sweep.execute import RunsLostError, finished_tasks, task_result
+from impedance_cosim.apps.sweep.execute import (
+    RunsLostError,
+    archive_on_workers,
+    finished_tasks,
+    task_result,
+)
 from impedance_cosim.apps.sweep.plan import master_arguments
-from impedance_cosim.apps.sweep.worker import RunInterruptedError, prepare_worker, run_point
+from impedance_cosim.apps.sweep.worker import RunInterruptedError, run_point
 
 SOURCES = ("observer", "difference", "measured")
 TIMINGS = ("gauss-seidel", "jacobi")  # sample-and-hold; torque one sample late
@@ -264,8 +269,7 @@ def run_study(
 
         return [b.row() for b in bisect_all(todo, submit, wait, **hooks)]
 
-    payload = client.scatter(data, broadcast=True, hash=False)
-    client.run(prepare_worker, data, digest)
+    payload, digest = archive_on_workers(client, ssp)
     running: dict[str, tuple[Case, float, Any]] = {}  # task key -> case, value, future
     stream = finished_tasks()  # this thread never waits inside a dask call (Ctrl-C)
 

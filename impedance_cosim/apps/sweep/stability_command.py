@@ -24,7 +24,7 @@ from typing import Any
 from impedance_cosim.apps.sweep import stability as st
 from impedance_cosim.apps.sweep.command import stop_on_signals
 from impedance_cosim.apps.sweep.execute import RunsLostError
-from impedance_cosim.apps.sweep.plan import default_ssp
+from impedance_cosim.apps.sweep.plan import default_ssp, workers_problem
 from impedance_cosim.apps.sweep.stability_log import PartLog, Record
 from impedance_cosim.apps.sweep.stability_parts import (
     FIG4_COLUMNS,
@@ -89,8 +89,8 @@ def _check(args: argparse.Namespace) -> Path:
         if name not in [c.name for c in fig4.CONDITIONS]:
             names = ", ".join(c.name for c in fig4.CONDITIONS)
             raise st.StabilityError(f"unknown condition {name!r} (have {names})")
-    if args.workers is not None and args.workers < 1:
-        raise st.StabilityError(f"--workers must be >= 1 (got {args.workers})")
+    if workers_problem(args.workers):
+        raise st.StabilityError(workers_problem(args.workers))
     if not (math.isfinite(args.stop) and args.stop >= 1 and args.stop.is_integer()):
         raise st.StabilityError(  # so that every whole-Hz rate divides the run
             f"--stop must be a whole number of seconds >= 1 (got {args.stop})"

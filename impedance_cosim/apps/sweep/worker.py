@@ -1,13 +1,14 @@
 """One run of a sweep, in the process that runs it (a dask worker, or this process for serial
 runs): the system archive read once per process (cached by digest), a Master per run, its row.
 
-The functions a dask task calls (run_batch, run_point, prepare_worker) live here: workers import
+The functions a dask task calls (run_batch, run_point) live here: workers import
 them by this module's path. A run that fails or diverges is a row with its status and reason; a
 run stopped by a signal is not a row (RunInterruptedError): the sweep stops.
 """
 
 from __future__ import annotations
 
+import hashlib
 import tempfile
 import time
 from collections.abc import Sequence
@@ -24,28 +25,29 @@ _SYSTEMS: dict[str, Any] = {}  # per process: SSP digest -> SystemDescription (F
 
 
 def _system(payload: bytes | str, digest: str):
+    """The system of the archive (its bytes, or its path on this machine: checked against the
+    digest), read and warmed up once per process (prepare_worker)."""
     system = _SYSTEMS.get(digest)
     if system is None:
         from impedance_cosim.cosim.ssp import read_ssp
 
-        if isinstance(payload, bytes):
-            with tempfile.TemporaryDirectory(prefix="impcosim_sweep_") as tmp:
-                path = Path(tmp) / "system.ssp"
-                path.write_bytes(payload)
-                system = read_ssp(path)
-        else:
-            system = read_ssp(payload)
+        data = payload if isinstance(payload, bytes) else Path(payload).read_bytes()
+        if hashlib.sha256(data).hexdigest() != digest:
+            raise RuntimeError(f"the system archive {payload} changed since the sweep started")
+        with tempfile.TemporaryDirectory(prefix="impcosim_sweep_") as tmp:
+            path = Path(tmp) / "system.ssp"
+            path.write_bytes(data)
+            system = read_ssp(path)
+        prepare_worker(system)
         _SYSTEMS[digest] = system
     return system
 
 
-def prepare_worker(payload: bytes | str, digest: str) -> str:
-    """Read the archive into this process's cache and take a few steps (loads the FMUs' libraries
-    and the compiled master loop), so a worker's first run costs what its others do."""
-    system = _system(payload, digest)
+def prepare_worker(system: Any) -> None:
+    """Take a few steps of the system (loads the FMUs' libraries and the compiled master loop),
+    so that the first run in a process costs what the others do (batch sizes are measured)."""
     h = system.step_size or 1 / 400
     Master(system, step_size=h, stop_time=system.start_time + 10 * h).run()
-    return digest
 
 
 class RunInterruptedError(Exception):
@@ -74,6 +76,7 @@ def run_point(
     row.update({m: None for m in METRICS})
     try:
         system = _system(payload, digest)
+        started = time.perf_counter()  # the first run in a process: after reading the archive
         result = Master(system, **master_arguments(point, options), instances=instances).run()
         if STOP["signal"] or _interrupted(result.error):
             raise RunInterruptedError(result.error or f"interrupted ({STOP['signal']})")

@@ -72,13 +72,16 @@ def main(argv: list[str] | None = None) -> int:
 def entry() -> None:
     """The console script: main(), then leave the process safely (see fmu.exit_process). A
     Ctrl-C before a command has taken over its signals (while the modules load, the arguments
-    are read) is one line and exit status 130 too, never a traceback."""
+    are read) is one line and exit status 130 too, never a traceback; that path leaves through
+    exit_process as well (an FMU library may already be loaded)."""
     try:
-        from impedance_cosim.cosim.fmu import exit_process
-
         status = main()
     except KeyboardInterrupt:
         print("impedance-cosim: interrupted (SIGINT) while starting", file=sys.stderr)
+        status = 128 + signal.SIGINT
+    try:
+        from impedance_cosim.cosim.fmu import exit_process
+    except KeyboardInterrupt:  # a second Ctrl-C while that loads: nothing of ours is loaded yet
         raise SystemExit(128 + signal.SIGINT) from None
     exit_process(status)
 

@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     from impedance_cosim.apps.sweep import command as sweep_command
 
     sweep_command.add_parser(sub)
-    from impedance_cosim.apps.sweep import stability_command
+    from impedance_cosim.apps.stability import command as stability_command
 
     stability_command.add_parser(sub)
     from impedance_cosim.apps.hil import add_parsers as add_hil_parsers

@@ -45,7 +45,7 @@ def test_every_docs_file_has_a_writer_named_in_the_markdown():
 def test_each_writer_writes_that_file():
     """The name a command writes in its --out folder is one its code writes."""
     from impedance_cosim.apps.report import CAPTIONS
-    from impedance_cosim.apps.sweep.stability_command import FIGURES, TABLES
+    from impedance_cosim.apps.stability.command import FIGURES, TABLES
     from impedance_cosim.apps.sweep.study import STUDY
 
     study = set()

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from impedance_cosim.apps import fig4, linearize
-from impedance_cosim.apps.sweep import stability
-from impedance_cosim.apps.sweep.stability_command import read_csv
+from impedance_cosim.apps.stability import bisection as stability
+from impedance_cosim.apps.stability.command import read_csv
 from impedance_cosim.cosim.loop import loop_step
 from impedance_cosim.physics.ode import integrate
 

@@ -19,8 +19,9 @@ import pytest
 from test_report import check_page
 
 from impedance_cosim.apps import fig4
-from impedance_cosim.apps.sweep import stability, stability_parts
-from impedance_cosim.apps.sweep.stability_command import read_csv, write_csv
+from impedance_cosim.apps.stability import bisection as stability
+from impedance_cosim.apps.stability import parts as stability_parts
+from impedance_cosim.apps.stability.command import read_csv, write_csv
 from impedance_cosim.cli import main
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
@@ -190,7 +191,7 @@ def test_linear_fails_part_way_then_resumes(native_ssp, tmp_path, monkeypatch, c
 def test_a_log_from_outside_is_checked_line_by_line(tmp_path):
     """Only well-formed runs of the same plan are kept; a torn or malformed line is run again;
     a log of another plan, or not a log, is refused with one line."""
-    from impedance_cosim.apps.sweep.stability_log import FORMAT, PartLog
+    from impedance_cosim.apps.stability.log import FORMAT, PartLog
 
     plan = {"ssp_sha256": "ab" * 32, "stop": 20.0}
     good = ["run", "rate", "observer", "jacobi", "ideal", "euler", 243.0]

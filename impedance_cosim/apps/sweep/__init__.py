@@ -1,6 +1,6 @@
 """Parameter sweeps: a grid (or a seeded random sample) over parameters of the system, every run
-on dask (or in series), the metrics of every run in one table, and maps of them; the stability
-study and the bisection of stability boundaries.
+on dask (or in series), the metrics of every run in one table, and maps of them (the stability
+study, `impedance-cosim stability`, is apps.stability, built on these runs).
 
 The modules, each importing only those above it:
   plan       what to run: swept axes, one point per run, checked before any work (SweepError)
@@ -11,9 +11,6 @@ The modules, each importing only those above it:
   cluster    the dask cluster: a LocalCluster or a checked scheduler (imports distributed)
   maps       the figures of a sweep
   study      `sweep --study`: the five stability maps
-  stability  bisection of stability boundaries; stability_command: `impedance-cosim stability`
-             (its parts, log of finished runs, figures and report: stability_parts, _log,
-             _figures, _report)
   command    `impedance-cosim sweep`: options, Ctrl-C/SIGTERM
 
 This package exposes the Python API of sweeps (plan_sweep, run_serial, run_dask, dask_client,

@@ -16,7 +16,7 @@ from impedance_cosim.apps.html_page import page as _page
 from impedance_cosim.apps.html_page import plain as _plain
 from impedance_cosim.apps.html_page import table as _table
 from impedance_cosim.apps.report import REPORT_NAME, _figures, _write
-from impedance_cosim.apps.sweep.stability_log import Record
+from impedance_cosim.apps.stability.log import Record
 
 WHAT = {
     "boundaries": "critical sample rate, observer gain K and wall stiffness, by bisection",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from impedance_cosim.apps.sweep import stability as st
+from impedance_cosim.apps.stability import bisection as st
 
 
 def radius_curves(rows: list[dict], path: Path) -> None:

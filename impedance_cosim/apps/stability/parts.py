@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.apps.sweep import stability as st
-from impedance_cosim.apps.sweep.stability_log import Key, PartLog
+from impedance_cosim.apps.stability import bisection as st
+from impedance_cosim.apps.stability.log import Key, PartLog
 from impedance_cosim.apps.sweep.worker import run_point
 from impedance_cosim.util.progress import Progress
 

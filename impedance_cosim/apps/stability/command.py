@@ -21,12 +21,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.sweep import stability as st
-from impedance_cosim.apps.sweep.command import stop_on_signals
-from impedance_cosim.apps.sweep.execute import RunsLostError
-from impedance_cosim.apps.sweep.plan import default_ssp, workers_problem
-from impedance_cosim.apps.sweep.stability_log import PartLog, Record
-from impedance_cosim.apps.sweep.stability_parts import (
+from impedance_cosim.apps.stability import bisection as st
+from impedance_cosim.apps.stability.log import PartLog, Record
+from impedance_cosim.apps.stability.parts import (
     FIG4_COLUMNS,
     GAIN_COLUMNS,
     LINEAR_COLUMNS,
@@ -38,6 +35,9 @@ from impedance_cosim.apps.sweep.stability_parts import (
     valid_record,
     write_csv,
 )
+from impedance_cosim.apps.sweep.command import stop_on_signals
+from impedance_cosim.apps.sweep.execute import RunsLostError
+from impedance_cosim.apps.sweep.plan import default_ssp, workers_problem
 from impedance_cosim.apps.sweep.worker import STOP, RunInterruptedError
 
 PARTS = ("boundaries", "linear", "fig4", "gain")
@@ -184,7 +184,7 @@ def _kept_table(part: str, table: Path) -> list[dict]:
 def _part(part: str, args: argparse.Namespace, ssp: Path, out: Path, log: PartLog,
           simulated: list[dict]) -> tuple[list[dict], list[str]]:  # fmt: skip
     """Run one part into its log; write its table (and figure): its rows, the figures drawn."""
-    from impedance_cosim.apps.sweep import stability_figures as figs
+    from impedance_cosim.apps.stability import figures as figs
 
     table = out / TABLES[part]
     if part == "boundaries":
@@ -247,7 +247,7 @@ def _cmd_stability(args: argparse.Namespace) -> int:
         finally:  # on every exit path: the provenance and the page
             record.write()
             if not args.no_report:
-                from impedance_cosim.apps.sweep.stability_report import write_report
+                from impedance_cosim.apps.stability.report import write_report
 
                 if page := write_report(out, record, outcome):
                     print(f"report: {page}")

@@ -18,7 +18,7 @@ from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.apps.sweep.stability import StabilityError
+from impedance_cosim.apps.stability.bisection import StabilityError
 from impedance_cosim.cosim import provenance
 
 FORMAT = "impedance-cosim stability log 1"

@@ -8,11 +8,11 @@ import os
 import signal
 import sys
 
-import impedance_cosim
 from impedance_cosim.util.interrupt import signal_name, sigterm_raises
 
 # The commands (numpy, fmpy, dask: up to a second to import) load inside main(), so that a
-# Ctrl-C while they load is caught by entry() like any other interrupt.
+# Ctrl-C while they load is caught by entry() like any other interrupt, and only the one asked
+# for loads at all (COMMANDS).
 
 
 class _Parser(argparse.ArgumentParser):
@@ -22,30 +22,70 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the impedance-cosim command."""
-    from impedance_cosim.apps import run as run_cmd
-    from impedance_cosim.apps.options import REPO, add_run_options
+# Each command: its one-line help and where its parser is defined ("module:function"). Only the
+# chosen command's module is imported (sweep and stability load numpy, fmpy and dask: up to a
+# second), so `--version`, `--help` and a mistyped command answer at once; the others get a
+# parser with their help line only. tests/test_cli_help.py checks these lines against the
+# parsers' own.
+COMMANDS = {
+    "build": ("build the FMUs and the system archive into fmus/", "impedance_cosim.cli:add_build"),
+    "dist": ("build everything and zip the distribution bundle",
+             "impedance_cosim.packaging.dist:add_parser"),
+    "run": ("run a scenario of the system: CSV, summary, figures", "impedance_cosim.cli:add_run"),
+    "sweep": ("parameter sweep on dask: metrics table (CSV) and maps (PNG)",
+              "impedance_cosim.apps.sweep.command:add_parser"),
+    "stability": ("stability study: bisected boundaries, linearised loop, Fig. 4 conditions,"
+                  " observer discretizations (docs/stability.md)",
+                  "impedance_cosim.apps.stability.command:add_parser"),
+    "swap": ("run the system with a component replaced by another FMU (checked first)",
+             "impedance_cosim.apps.hil:add_parsers"),
+    "robot": ("the stand-in for the robot hardware: the plant model behind the bridge protocol",
+              "impedance_cosim.apps.hil:add_parsers"),
+}  # fmt: skip
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser, in full for `command` (every command when it is "*"), with
+    only the help line for the others (see COMMANDS)."""
+    from importlib import import_module
+
+    from impedance_cosim.version import __version__
 
     parser = _Parser(
         prog="impedance-cosim",
         description="Impedance control without velocity measurements, as FMI co-simulation.",
     )
-    parser.add_argument("--version", action="version",
-                        version=f"%(prog)s {impedance_cosim.__version__}")  # fmt: skip
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("build", help="build the FMUs and the system archive into fmus/")
+    wanted = {COMMANDS[c][1] for c in COMMANDS if command in (c, "*")}
+    for where in wanted:
+        module, function = where.split(":")
+        getattr(import_module(module), function)(sub)
+    for name, (help_text, where) in COMMANDS.items():
+        if where not in wanted:
+            sub.add_parser(name, help=help_text)
+    return parser
+
+
+def add_build(sub) -> None:
+    """The `build` subcommand."""
+    from impedance_cosim.apps import run as run_cmd
+    from impedance_cosim.apps.options import REPO
+
+    p = sub.add_parser("build", help=COMMANDS["build"][0])
     p.add_argument("--out", default=str(REPO / "fmus"),
                    help="output folder (default: the repository's fmus/)")  # fmt: skip
     p.add_argument("--only", action="append", choices=["plant", "controller", "bridge"],
                    help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
     p.set_defaults(func=run_cmd.cmd_build)
-    from impedance_cosim.packaging import dist
 
-    dist.add_parser(sub)
 
-    p = sub.add_parser("run", help="run a scenario of the system: CSV, summary, figures",
-                       epilog=RUN_EXIT_STATUS)  # fmt: skip
+def add_run(sub) -> None:
+    """The `run` subcommand."""
+    from impedance_cosim.apps import run as run_cmd
+    from impedance_cosim.apps.options import add_run_options
+
+    p = sub.add_parser("run", help=COMMANDS["run"][0], epilog=RUN_EXIT_STATUS)
     add_run_options(p)
     p.add_argument(
         "--list-parameters",
@@ -53,18 +93,15 @@ def main(argv: list[str] | None = None) -> int:
         help="list the names --set accepts, with the scenario's values, and exit",
     )
     p.set_defaults(func=run_cmd.cmd_run)
-    from impedance_cosim.apps.sweep import command as sweep_command
 
-    sweep_command.add_parser(sub)
-    from impedance_cosim.apps.stability import command as stability_command
 
-    stability_command.add_parser(sub)
-    from impedance_cosim.apps.hil import add_parsers as add_hil_parsers
-
-    add_hil_parsers(sub)
-
-    args = parser.parse_args(argv)
-    args.command_line = ["impedance-cosim", *(sys.argv[1:] if argv is None else argv)]
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the impedance-cosim command."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # The top level takes no option with a value: the first word is the command.
+    command = next((a for a in argv if not a.startswith("-")), None)
+    args = build_parser(command if command in COMMANDS else None).parse_args(argv)
+    args.command_line = ["impedance-cosim", *argv]
     with sigterm_raises():
         return _dispatch(args)
 
@@ -72,16 +109,14 @@ def main(argv: list[str] | None = None) -> int:
 def entry() -> None:
     """The console script: main(), then leave the process safely (see fmu.exit_process). A
     Ctrl-C before a command has taken over its signals (while the modules load, the arguments
-    are read) is one line and exit status 130 too, never a traceback; that path leaves through
-    exit_process as well (an FMU library may already be loaded)."""
+    are read) is one line and exit status 130 too, never a traceback (no FMU is loaded then:
+    the commands catch their own interrupts)."""
     try:
+        from impedance_cosim.cosim.fmu import exit_process
+
         status = main()
     except KeyboardInterrupt:
         print("impedance-cosim: interrupted (SIGINT) while starting", file=sys.stderr)
-        status = 128 + signal.SIGINT
-    try:
-        from impedance_cosim.cosim.fmu import exit_process
-    except KeyboardInterrupt:  # a second Ctrl-C while that loads: nothing of ours is loaded yet
         raise SystemExit(128 + signal.SIGINT) from None
     exit_process(status)
 

@@ -150,6 +150,7 @@ def test_ctrl_c_while_starting_is_one_line(monkeypatch, capsys):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(options, "add_run_options", interrupted_import)  # inside main()
+    monkeypatch.setattr("sys.argv", ["impedance-cosim", "run"])
     with pytest.raises(SystemExit) as stop:
         cli.entry()
     assert stop.value.code == 130

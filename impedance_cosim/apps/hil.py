@@ -256,7 +256,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--allow-remote", action="store_true",
                    help="allow a --host other machines can reach ('' or 0.0.0.0: every "
                         "interface); see docs/hil.md, Trust model")  # fmt: skip
-    p.add_argument("--port", default="50400", help="UDP port (0: a free one)")
+    p.add_argument("--port", default="50400", help="UDP port (default 50400; 0: a free one)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="realtime", action="store_false", default=False,
                       help="advance only on request (default; deterministic)")  # fmt: skip

@@ -57,8 +57,10 @@ def add_parser(sub) -> None:
     )
     p.add_argument("parts", nargs="*", default=None, metavar="PART",
                    help=f"which parts ({', '.join(PARTS)}; default all)")  # fmt: skip
-    p.add_argument("--out", default="results/stability", help="output folder")
-    p.add_argument("--ssp", default=None, help="system archive (default: the native one)")
+    p.add_argument("--out", default="results/stability",
+                   help="output folder (default results/stability)")  # fmt: skip
+    p.add_argument("--ssp", default=None, help="system archive (default: the native one,"
+                   " PaperScenario-native.ssp: the same models in C, for many runs)")  # fmt: skip
     p.add_argument("--stop", type=float, default=20.0, help="run length in s (default 20)")
     for name, allowed in (("quantity", st.QUANTITIES), ("sensor", st.SENSORS),
                           ("velocity", st.SOURCES), ("timing", st.TIMINGS)):  # fmt: skip

@@ -73,11 +73,20 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--ssp",
         default=None,
-        help=f"system archive (default {DEFAULT_SSP.name}: the "
-        "native FMUs, built if missing or out of date)",
+        help=f"system archive (default {DEFAULT_SSP.name}: the native FMUs, built if missing or"
+        " out of date; `run` defaults to the Python FMUs, the reference, while a sweep's many runs"
+        " take the C edition of the same models, which gives the same results bit for bit and"
+        " runs far faster)",
     )
     p.add_argument("--scenario", default=None, help="parameter set (default: the SSD's first)")
-    p.add_argument("--algorithm", choices=ALGORITHMS, default=None)
+    p.add_argument(
+        "--algorithm",
+        choices=ALGORITHMS,
+        default=None,
+        help="master algorithm (default: the archive's, gauss-seidel, controller first; jacobi:"
+        " every FMU steps on the others' outputs of the step before, one sample of delay; or"
+        " sweep it: --grid system.algorithm=gauss-seidel,jacobi)",
+    )
     p.add_argument("--stop", type=float, default=None, help="stop time [s] (default 20)")
     p.add_argument("--step", type=float, default=None, help="communication step [s] (1/400)")
     p.add_argument(

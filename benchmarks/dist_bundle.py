@@ -20,9 +20,13 @@ from impedance_cosim.packaging.dist import NAME, build_dist
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3, help="builds to time (default 3)")
-    args = parser.parse_args()
+    measure(parser.parse_args().repeat)
+
+
+def measure(repeat: int) -> None:
+    """Build and bundle `repeat` times from scratch; print the bundle's size and the times."""
     times = []
-    for _ in range(args.repeat):
+    for _ in range(repeat):
         with tempfile.TemporaryDirectory(prefix="impcosim_dist_bench_") as tmp:
             start = time.perf_counter()
             path = build_dist(Path(tmp) / "dist", Path(tmp) / "fmus")

@@ -3,7 +3,8 @@ the master's speed (plain models, our master, fmpy's simulate_ssp), the native F
 sweep speed-ups: serial (single runs in this process, the reference) against a LocalCluster
 (with and without its start) and against an external `dask scheduler` + `dask worker`s on
 loopback, for 64 native runs, the native stability study (every map of `sweep --study`) and 64
-Python runs. Every dask table is checked equal to the serial one.
+Python runs, and the distribution bundle (its size and build time, benchmarks/dist_bundle.py). Every
+dask table is checked equal to the serial one.
 
     python benchmarks/run_all.py            # ~5 min on 2 idle cores
     python benchmarks/run_all.py --quick    # shorter runs, fewer of them (~1 min)
@@ -189,7 +190,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="5 s runs, 16-run grids, no study")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--no-external", action="store_true", help="skip the external cluster")
-    parser.add_argument("--only", choices=["master", "sweeps"], default=None)
+    parser.add_argument("--only", choices=["master", "sweeps", "bundle"], default=None)
     args = parser.parse_args()
     if not (DEFAULT_OUT / "PaperScenario-native.ssp").is_file():
         build_all()
@@ -222,6 +223,11 @@ def main() -> None:
         python_plan = sweep.plan_sweep(grid, ssp=python, stop=stop)
         cases[f"Python, {len(python_plan.points)} runs"] = [python_plan]
         sweep_table(cases, args.workers, not args.no_external)
+    if args.only in (None, "bundle"):
+        import dist_bundle  # beside this script
+
+        print("\nthe distribution bundle (impedance-cosim dist), built from scratch once:")
+        dist_bundle.measure(1)
     print(f"\nload average at the end: {' '.join(f'{v:.1f}' for v in os.getloadavg())}")
 
 

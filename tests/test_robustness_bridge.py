@@ -62,6 +62,14 @@ def env_without_token() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k != protocol.TOKEN_ENV}
 
 
+def swap_bridge(ssp_path: Path, fmu_dir: Path, out: Path, stop: str, *sets: str) -> list[str]:
+    """The `swap` command line that runs the system with the bridge FMU as its plant."""
+    settings = [arg for item in sets for arg in ("--set", item)]
+    return [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
+            f"plant={fmu_dir / 'BridgePlant.fmu'}", *settings, "--stop", stop, "--no-figures",
+            "--out", str(out)]  # fmt: skip
+
+
 def wait_for_line(stream, text: str, timeout: float = 120.0) -> str:
     """The first line of `stream` that contains `text` (AssertionError after `timeout`)."""
     lines = []
@@ -139,9 +147,7 @@ def test_swap_refuses_a_fifo_token_file_before_it_runs(ssp_path, fmu_dir, odd_fi
                                                         procs):  # fmt: skip
     fifo, message = odd_files["fifo"]
     out = tmp_path / "res"
-    cmd = [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
-           f"plant={fmu_dir / 'BridgePlant.fmu'}", "--set", f"plant.robot_token_file={fifo}",
-           "--stop", "0.1", "--no-figures", "--out", str(out)]  # fmt: skip
+    cmd = swap_bridge(ssp_path, fmu_dir, out, "0.1", f"plant.robot_token_file={fifo}")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     procs.append(proc)
     _, err = proc.communicate(timeout=120)  # TimeoutExpired: it blocked
@@ -187,10 +193,8 @@ def test_a_signal_during_the_init_wait_ends_it(ssp_path, fmu_dir, tmp_path, proc
     silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     silent.bind(("127.0.0.1", 0))
     port = silent.getsockname()[1]
-    cmd = [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
-           f"plant={fmu_dir / 'BridgePlant.fmu'}", "--set", f"plant.robot_port={port}",
-           "--set", f"plant.robot_token={TOKEN}", "--set", "plant.init_timeout_s=600",
-           "--stop", "0.1", "--no-figures", "--out", str(tmp_path / "res")]  # fmt: skip
+    cmd = swap_bridge(ssp_path, fmu_dir, tmp_path / "res", "0.1", f"plant.robot_port={port}",
+                      f"plant.robot_token={TOKEN}", "plant.init_timeout_s=600")  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     procs.append(proc)
     try:
@@ -215,10 +219,8 @@ def test_a_signal_during_a_step_wait_ends_it(ssp_path, fmu_dir, tmp_path, procs)
     with open(log, "w") as err:
         robot, port = start_robot(TOKEN, extra=["--fault=late@5:60"], stderr=err)
     procs.append(robot)
-    cmd = [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
-           f"plant={fmu_dir / 'BridgePlant.fmu'}", "--set", f"plant.robot_port={port}",
-           "--set", f"plant.robot_token={TOKEN}", "--set", "plant.timeout_s=60",
-           "--stop", "1", "--no-figures", "--out", str(tmp_path / "res")]  # fmt: skip
+    cmd = swap_bridge(ssp_path, fmu_dir, tmp_path / "res", "1", f"plant.robot_port={port}",
+                      f"plant.robot_token={TOKEN}", "plant.timeout_s=60")  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     procs.append(proc)
     with open(log) as lines:

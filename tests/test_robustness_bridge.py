@@ -430,11 +430,19 @@ def test_a_second_robot_on_the_same_port_is_refused(procs):
 # --- item 5: a signal to the robot is its exit status ------------------------------------------
 
 
+@pytest.mark.parametrize("ignored", [False, True], ids=["", "started with SIGINT ignored"])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_a_signal_stops_the_robot_with_its_status(tmp_path, procs, sig):
+def test_a_signal_stops_the_robot_with_its_status(tmp_path, procs, sig, ignored):
+    """Also when the robot inherits SIGINT ignored, as a script's background job does (Python
+    then installs no handler of its own: the command must)."""
     log = tmp_path / "robot.log"
-    with open(log, "w") as err:
-        robot, _ = start_robot(TOKEN, stderr=err)  # it has printed its first line: serving
+    inherited = signal.SIG_IGN if ignored else signal.getsignal(signal.SIGINT)
+    previous = signal.signal(signal.SIGINT, inherited)
+    try:
+        with open(log, "w") as err:
+            robot, _ = start_robot(TOKEN, stderr=err)  # it has printed its first line: serving
+    finally:
+        signal.signal(signal.SIGINT, previous)
     procs.append(robot)
     robot.send_signal(sig)
     assert robot.wait(timeout=60) == 128 + sig

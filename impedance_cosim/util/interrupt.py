@@ -76,7 +76,9 @@ class StopSignals:
 @contextlib.contextmanager
 def sigterm_raises() -> Iterator[None]:
     """While active (main thread only), SIGTERM raises `Terminated` instead of killing the
-    process outright, so temporary files are removed and partial results are kept."""
+    process outright, so temporary files are removed and partial results are kept; and SIGINT
+    raises KeyboardInterrupt even when the process started with SIGINT ignored (a background
+    job of a script: Python then installs no handler, and `kill -INT` did nothing)."""
     term = getattr(signal, "SIGTERM", None)
     if term is None or threading.current_thread() is not threading.main_thread():
         yield
@@ -86,7 +88,9 @@ def sigterm_raises() -> Iterator[None]:
         raise Terminated("terminated (SIGTERM)")
 
     previous = signal.signal(term, handle)
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         yield
     finally:
+        signal.signal(signal.SIGINT, previous_int if previous_int is not None else signal.SIG_DFL)
         signal.signal(term, previous if previous is not None else signal.SIG_DFL)

@@ -491,7 +491,7 @@ int model_initialize(Data *d, char *msg)
                 return 1;
             }
             snprintf(msg, MSG_MAX,
-                     "%s: at initialization (t=%s) the torque is gravity compensation only,"
+                     "%.300s: at initialization (t=%s) the torque is gravity compensation only,"
                      " tau = g(q); a step that samples at a singular pose is refused",
                      reason, buf[0]);
         } else if (r) {

@@ -7,8 +7,9 @@ parameters.py. It runs at its own period Ts
 
 - sample k happens at t_k = start_time + k * Ts (k an integer counter, never an accumulated sum);
 - sample 0 is computed when the model is built (FMI initialization), from the inputs given then,
-  with the observer at its start value yhat0. A host may give any finite inputs then (FMI 3.0,
-  2.4.7.5: the importer decides when inputs take their start values; loop-cutting hosts give 0,
+  with the observer at its start value yhat0. A host may give any finite inputs then (FMI 2.0
+  and 3.0, attribute initial: "The environment decides when to use the start value of a variable
+  with causality = input"; loop-cutting hosts give 0,
   the stretched-arm singularity q2 = 0). Where eq. (10) is undefined (J singular) sample 0 holds
   gravity compensation only, tau = g(q) (clipped like any torque), the other outputs as usual,
   and `init_warnings` says so (the FMU logs it as a warning); a later sample at a singular pose

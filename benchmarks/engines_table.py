@@ -6,7 +6,8 @@ docs/system.md, as Markdown).
 
 Engines: libcosim, ecospy (named set, no set, an unknown set name), fmpy's simulate_ssp (the
 bindings passed as its parameter_set, and as it is), the fmucontainer FMU under `fmpy simulate`
-(parallel, sequential), our master. Each is compared with our master running the same algorithm
+(parallel, sequential; and built from the .ssp itself, which exposes no linked output and holds
+no start value), our master. Each is compared with our master running the same algorithm
 on every connected signal: "its conventions" = our master on the engine's time grid, start
 inputs and step order (engines.py, containers.py), "ours" = our master's own (t_0 + i h,
 connections from the initialized outputs). "parameters applied" reads which velocity the law
@@ -19,13 +20,22 @@ to just before. Native FMUs (--python: the Python ones). Build first: impedance-
 from __future__ import annotations
 
 import argparse
+import shutil
+import subprocess
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
+from fmpy import read_model_description
 
-from impedance_cosim.cosim.containers import build_container, master_like_container, run_container
+from impedance_cosim.cosim.containers import (
+    FMUCONTAINER,
+    build_container,
+    master_like_container,
+    run_container,
+)
 from impedance_cosim.cosim.engines import (
     AccumulatedTimes,
     nanosecond_times,
@@ -79,6 +89,23 @@ def fmpy_as_is(archive: Path, stop: float) -> dict[str, np.ndarray]:
     return {name: rows[name][:n] for name in rows.dtype.names if name != "time"}
 
 
+def container_from_ssp(archive: Path, work: Path) -> tuple[int, int]:
+    """fmucontainer on the .ssp itself (its "ALPHA" SSP input): (outputs the container exposes,
+    start values it holds for the embedded FMUs, counted in its resources/container.txt)."""
+    folder = work / f"ssp-{archive.stem}"
+    folder.mkdir()
+    shutil.copy(archive, folder / "system.ssp")
+    subprocess.run([sys.executable, "-c", FMUCONTAINER, "-container", f"system.ssp:{H}"],
+                   cwd=folder, capture_output=True, check=True)  # fmt: skip
+    md = read_model_description(str(folder / "system.fmu"), validate=False)
+    outputs = sum(v.causality == "output" for v in md.modelVariables)
+    with zipfile.ZipFile(folder / "system.fmu") as z:
+        lines = z.read("resources/container.txt").decode().splitlines()
+    starts = sum(int(lines[i + 1].split()[0]) for i, line in enumerate(lines)
+                 if line.startswith("# Start values of"))  # fmt: skip
+    return outputs, starts
+
+
 def engine_rows(archive: Path, scenario: str, work: Path) -> list[tuple]:
     """(engine, algorithm, stop, runs, applied, vs ours on its conventions, vs ours) rows."""
     stop = JACOBI_STOP[scenario]
@@ -115,6 +142,9 @@ def engine_rows(archive: Path, scenario: str, work: Path) -> list[tuple]:
         lambda: run_in_fmpy(archive, stop, H), fmpy_like, shift=1, default=jacobi)  # fmt: skip
     add("fmpy simulate_ssp (as is)", "Jacobi", stop, lambda: fmpy_as_is(archive, stop),
         fmpy_like, shift=1, default=jacobi)  # fmt: skip
+    outputs, starts = container_from_ssp(archive, work)
+    rows.append(("fmucontainer on the .ssp itself", "Jacobi", "-", f"builds; {outputs} outputs",
+                 f"**no** ({starts} start values)", "-", "-"))  # fmt: skip
     gs = ours(archive, "gauss-seidel", 20.0)
     for sequential, s_stop in ((False, stop), (True, 20.0)):
         mode = "sequential" if sequential else "parallel"

@@ -3,8 +3,9 @@ the master's speed (plain models, our master, fmpy's simulate_ssp), the native F
 sweep speed-ups: serial (single runs in this process, the reference) against a LocalCluster
 (with and without its start) and against an external `dask scheduler` + `dask worker`s on
 loopback, for 64 native runs, the native stability study (every map of `sweep --study`) and 64
-Python runs, and the distribution bundle (its size and build time, benchmarks/dist_bundle.py). Every
-dask table is checked equal to the serial one.
+Python runs, the distribution bundle (its size and build time, benchmarks/dist_bundle.py), and the
+engine table (every engine on every scenario archive, benchmarks/engines_table.py). Every dask
+table is checked equal to the serial one.
 
     python benchmarks/run_all.py            # ~5 min on 2 idle cores
     python benchmarks/run_all.py --quick    # shorter runs, fewer of them (~1 min)
@@ -190,7 +191,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="5 s runs, 16-run grids, no study")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--no-external", action="store_true", help="skip the external cluster")
-    parser.add_argument("--only", choices=["master", "sweeps", "bundle"], default=None)
+    parser.add_argument("--only", choices=["master", "sweeps", "bundle", "engines"], default=None)
     args = parser.parse_args()
     if not (DEFAULT_OUT / "PaperScenario-native.ssp").is_file():
         build_all()
@@ -228,6 +229,11 @@ def main() -> None:
 
         print("\nthe distribution bundle (impedance-cosim dist), built from scratch once:")
         dist_bundle.measure(1)
+    if args.only in (None, "engines"):
+        import engines_table  # beside this script
+
+        print("\nevery engine on every scenario archive (docs/system.md):")
+        engines_table.table()
     print(f"\nload average at the end: {' '.join(f'{v:.1f}' for v in os.getloadavg())}")
 
 

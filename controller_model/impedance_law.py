@@ -14,6 +14,10 @@ TWO_PI = 2.0 * math.pi
 SINGULAR_TOL = 1e-6  # |det J| below SINGULAR_TOL * a1 * a2 (i.e. |sin q2| < 1e-6) is singular
 
 
+class SingularPoseError(ModelError):
+    """The impedance law is undefined at this pose: J is singular (eq. 10 needs J^-1)."""
+
+
 def wrap_angle(a: float) -> float:
     """a wrapped to (-pi, pi], so an orientation error never takes the long way round."""
     w = math.remainder(a, TWO_PI)
@@ -32,11 +36,12 @@ def impedance_terms(
     B: Vec3,
 ) -> tuple[Vec3, Vec3, Vec3]:
     """Joint torque of eq. (10), with the tracking error e = x - x_v and the observed Cartesian
-    velocity J yhat it used (outputs of the controller). Raises ModelError when J is singular."""
+    velocity J yhat it used (outputs of the controller). Raises SingularPoseError when J is
+    singular."""
     det = arm.jacobian_det(q)
     p = arm.params
     if not abs(det) >= SINGULAR_TOL * p.a1 * p.a2:
-        raise ModelError(
+        raise SingularPoseError(
             f"the Jacobian is singular at q = ({q[0]:.6g}, {q[1]:.6g}, {q[2]:.6g}) rad"
             f" (det J = a1 a2 sin q2 = {det:.3g}): the impedance law needs J^-1"
         )
@@ -68,6 +73,17 @@ def impedance_terms(
         hq[2] + cq[2] + fq[2] + g[2] + jtf[2],
     )
     return tau, e, xd_hat
+
+
+def gravity_hold_terms(arm: Arm, q: Vec3, yhat: Vec3, xv: Vec3) -> tuple[Vec3, Vec3, Vec3]:
+    """What the controller outputs where eq. (10) is undefined (a singular J, only ever at
+    initialization): gravity compensation tau = g(q) alone, with the tracking error and J yhat,
+    which are defined at every pose (same order of operations as impedance_terms)."""
+    terms = arm.terms
+    j = terms.jacobian(q)
+    pose = terms.kinematics(q)
+    e = (pose[0] - xv[0], pose[1] - xv[1], wrap_angle(pose[2] - xv[2]))
+    return terms.gravity(q), e, matvec(j, yhat)
 
 
 def impedance_law(

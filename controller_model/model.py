@@ -7,7 +7,13 @@ parameters.py. It runs at its own period Ts
 
 - sample k happens at t_k = start_time + k * Ts (k an integer counter, never an accumulated sum);
 - sample 0 is computed when the model is built (FMI initialization), from the inputs given then,
-  with the observer at its start value yhat0;
+  with the observer at its start value yhat0. A host may give any finite inputs then (FMI 2.0
+  and 3.0, attribute initial: "The environment decides when to use the start value of a variable
+  with causality = input"; loop-cutting hosts give 0,
+  the stretched-arm singularity q2 = 0). Where eq. (10) is undefined (J singular) sample 0 holds
+  gravity compensation only, tau = g(q) (clipped like any torque), the other outputs as usual,
+  and `init_warnings` says so (the FMU logs it as a warning); a later sample at a singular pose
+  fails the step (ModelError naming the pose; the FMU adds the step time);
 - do_step(t, h, u) processes every not yet processed sample with t <= t_k < t + h (times compared
   with a tolerance of 1e-9 Ts). The sample at t_k == t uses the inputs u just given; samples
   strictly inside the step (only when the master's step is longer than Ts) reuse the same u
@@ -31,7 +37,7 @@ import dataclasses
 import math
 from typing import Any
 
-from controller_model.impedance_law import impedance_terms
+from controller_model.impedance_law import SingularPoseError, gravity_hold_terms, impedance_terms
 from controller_model.observer import observer_update
 from controller_model.parameters import (
     VELOCITY_SOURCE,
@@ -152,9 +158,16 @@ class ControllerModel(FmuModel):
         q, f, qd_meas = self._split(INPUT_START if inputs is None else inputs)
         # Sample 0, from the inputs at initialization; the observer starts at yhat0.
         z = (0.0, 0.0, 0.0)
-        self.yhat, self.q_prev, self.tau_prev, self.f_prev, self.out = self._sample(
-            0, self.yhat0, z, z, z, q, f, qd_meas
-        )
+        try:
+            sample0 = self._sample(0, self.yhat0, z, z, z, q, f, qd_meas)
+        except SingularPoseError as exc:  # any finite inputs initialize (module docstring)
+            sample0 = self._sample(0, self.yhat0, z, z, z, q, f, qd_meas, law=False)
+            self.init_warnings = (
+                f"{exc}: at initialization (t={self.start_time}) the torque is gravity"
+                " compensation only, tau = g(q); a step that samples at a singular pose is"
+                " refused",
+            )
+        self.yhat, self.q_prev, self.tau_prev, self.f_prev, self.out = sample0
         self.t = self.start_time
         self.k_next = 1
         self.held_input_samples = 0  # samples taken strictly inside a step, on held inputs
@@ -179,9 +192,11 @@ class ControllerModel(FmuModel):
         q: Vec3,
         f: Vec3,
         qd_meas: Vec3,
+        law: bool = True,
     ) -> tuple[Vec3, Vec3, Vec3, Vec3, tuple]:
         """Sample k from the previous sample's state and this sample's inputs, without touching
-        self: returns (yhat, q, applied tau, F_au, outputs)."""
+        self: returns (yhat, q, applied tau, F_au, outputs). law False: gravity compensation
+        instead of eq. (10) (sample 0 at a singular pose)."""
         ts = self.ctrl.sample_period
         if k == 0:
             yhat = qd_diff = self.yhat0
@@ -194,9 +209,12 @@ class ControllerModel(FmuModel):
         source = self.source
         qd_hat = yhat if source == "observer" else qd_diff if source == "difference" else qd_meas
         xv, xv_dot, xv_ddot = virtual_trajectory(self.traj, self.start_time + k * ts)
-        tau, e, xd_hat = impedance_terms(
-            self.arm, q, qd_hat, f, xv, xv_dot, xv_ddot, self.G, self.B
-        )
+        if law:
+            tau, e, xd_hat = impedance_terms(
+                self.arm, q, qd_hat, f, xv, xv_dot, xv_ddot, self.G, self.B
+            )
+        else:
+            tau, e, xd_hat = gravity_hold_terms(self.arm, q, qd_hat, xv)
         if self.ctrl.limit_torque:
             m = self.tau_max
             tau = (

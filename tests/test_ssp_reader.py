@@ -89,7 +89,8 @@ def refused(path: Path, match: str, **kw) -> str:
 
 def test_the_archive_reads_and_close_removes_the_folder(archive, private_tmp):
     desc = read_ssp(archive)
-    assert [c.name for c in desc.components] == ["controller", "plant"]
+    assert [c.name for c in desc.components] == ["plant", "controller"]  # as the SSD lists them
+    assert desc.order == ["controller", "plant"]  # our master's Gauss-Seidel order (annotation)
     assert desc.component("plant").fmu == desc.folder / PLANT
     assert desc.component("plant").fmu.is_file()
     assert list(desc.parameter_sets) == ["observer", "difference", "measured"]

@@ -62,6 +62,16 @@ COMPONENTS = (
     ComponentDef("plant", "PumaPlant.fmu", PlantModel),
 )
 
+# The order of the Elements in every SSD we write: the plant first. A loop-cutting importer cuts
+# the loop before the first component it lists (fmu-manipulation-toolbox 2.0's fmucontainer: the
+# first FMU reads its inputs from link buffers, 0.0 at initialization; the others read the
+# current outputs), so it cuts where the paper's sample-and-hold does: the plant gets the held
+# torque, the controller samples the plant's current outputs, and it is initialized from them.
+# Our master's Gauss-Seidel order is the annotation's (COMPONENTS above), not this one; the
+# container's sequential mode, Gauss-Seidel in this order, equals Master with order plant,
+# controller (impedance_cosim/cosim/containers.py).
+SSD_ELEMENT_ORDER = ("plant", "controller")
+
 # (start element, start connector, end element, end connector)
 CONNECTIONS = (
     *(("plant", f"q{i}", "controller", f"q{i}") for i in (1, 2, 3)),
@@ -170,7 +180,7 @@ def ssd_xml(scenario: str = "observer") -> bytes:
     elements = ET.SubElement(system, _q("ssd", "Elements"))
     used_units: set[str] = set()
     enumerations = {}
-    for comp in COMPONENTS:
+    for comp in sorted(COMPONENTS, key=lambda c: SSD_ELEMENT_ORDER.index(c.name)):
         el = ET.SubElement(
             elements,
             _q("ssd", "Component"),

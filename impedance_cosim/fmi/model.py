@@ -31,6 +31,8 @@ class FmuModel:
     }
     # "" when no output depends directly on an input at a communication point; None otherwise.
     OUTPUT_DEPENDENCIES: ClassVar[str | None] = None
+    # What initialization did that the host should know (logged as FMI warnings by the glue).
+    init_warnings: tuple[str, ...] = ()
 
     @classmethod
     def variables(cls) -> list[Variable]:

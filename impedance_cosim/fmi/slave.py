@@ -53,6 +53,7 @@ class ModelSlave:
     _causality: Any = Fmi2Causality
     _variability: Any = Fmi2Variability
     _error_status: Any = Fmi2Status.error
+    _warning_status: Any = Fmi2Status.warning
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)  # type: ignore[call-arg]
@@ -206,13 +207,15 @@ class ModelSlave:
             self._fail(str(exc))
         self._outputs = list(self.model.outputs())
         self._dirty = False
+        for warning in self.model.init_warnings:
+            self._report(warning, warning=True)
 
-    def _report(self, message: str) -> None:
-        """Log an error through the FMU logger, and to stderr: pythonfmu 0.7 drops every log
-        message (errors included) unless the host turned debug logging on."""
+    def _report(self, message: str, warning: bool = False) -> None:
+        """Log an error (or a warning) through the FMU logger, and to stderr: pythonfmu 0.7 drops
+        every log message (errors included) unless the host turned debug logging on."""
         text = f"{self.model_class.MODEL_NAME} '{self.instance_name}': {message}"
-        self.log(text, self._error_status)
-        print(f"error: {text}", file=sys.stderr, flush=True)
+        self.log(text, self._warning_status if warning else self._error_status)
+        print(f"{'warning' if warning else 'error'}: {text}", file=sys.stderr, flush=True)
 
     def _fail(self, message: str) -> None:
         """Report a clear error, then raise (pythonfmu then returns fmi2Fatal)."""

@@ -24,6 +24,7 @@ class ModelSlave3(ModelSlave):
     _causality = Fmi3Causality
     _variability = Fmi3Variability
     _error_status = Fmi3Status.error
+    _warning_status = Fmi3Status.warning
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)

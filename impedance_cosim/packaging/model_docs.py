@@ -108,9 +108,12 @@ velocity J(q)ŷ (C<sub>x</sub> evaluated at ŷ, errata):</p>
 F<sub>e</sub> = F<sub>au</sub> + H<sub>x</sub>ẍ<sub>v</sub>
 + C<sub>x</sub>(q, ŷ)ẋ<sub>v</sub> + F<sub>x</sub>ẋ<sub>v</sub> + g<sub>x</sub>(q)
 − B(Jŷ − ẋ<sub>v</sub>) − Ge &nbsp; (10)</p>
-<p>computed in joint space (Jᵀ H<sub>x</sub> = H J⁻¹ etc.); a singular J (|sin q₂| &lt; 10⁻⁶) is
-refused. G = diag(G1, G2, G3), B = diag(B1, B2, B3). Numbers: {gains}. The velocity fed to the
-law is chosen by <code>velocity_source</code>: observer (the paper), difference or measured.
+<p>computed in joint space (Jᵀ H<sub>x</sub> = H J⁻¹ etc.). Eq. (10) needs J⁻¹: at a singular J
+(|sin q₂| &lt; 10⁻⁶) initialization still succeeds, whatever finite inputs the host gave (zeros
+are q₂ = 0), with τ = g(q), gravity compensation only, as sample 0 and a warning in the log; a
+step that samples at a singular pose is refused (its time and q in the message).
+G = diag(G1, G2, G3), B = diag(B1, B2, B3). Numbers: {gains}. The velocity fed to the law is
+chosen by <code>velocity_source</code>: observer (the paper), difference or measured.
 Optional torque limits (<code>limit_torque</code>): the observer then uses the clipped torque.</p>
 """
 

@@ -24,6 +24,7 @@
 #define SINGULAR_TOL 1e-6 /* |det J| below SINGULAR_TOL * a1 * a2 is singular */
 #define TIME_TOL 1e-9     /* sample-time comparisons, relative to the sample period */
 #define N_OUTPUTS 24      /* VR_tau1 .. VR_e_phi, contiguous and in ControllerModel's order */
+#define SINGULAR_POSE 2   /* impedance_terms' return when J is singular (eq. 10 undefined) */
 
 static const char *const VELOCITY_SOURCES[3] = {"observer", "difference", "measured"};
 /* observer_discretization (OBSERVER_DISCRETIZATIONS) */
@@ -280,11 +281,12 @@ static int impedance_terms(const Params *p, const double q[3], const double yhat
     const double det = arm_jacobian_det(arm, q);
     double j[9], qd_v[3], jdot[9], jdot_qd[3], rhs[3], qdd_v[3], pose[3], f_c[3], jtf[3];
     double h[9], hq[3], c[9], cq[3], fq[3], g[3];
-    if (!(fabs(det) >= SINGULAR_TOL * arm->a1 * arm->a2)) {
-        return fail(msg,
-                    "the Jacobian is singular at q = (%.6g, %.6g, %.6g) rad"
-                    " (det J = a1 a2 sin q2 = %.3g): the impedance law needs J^-1",
-                    q[0], q[1], q[2], det);
+    if (!(fabs(det) >= SINGULAR_TOL * arm->a1 * arm->a2)) { /* Python: SingularPoseError */
+        fail(msg,
+             "the Jacobian is singular at q = (%.6g, %.6g, %.6g) rad"
+             " (det J = a1 a2 sin q2 = %.3g): the impedance law needs J^-1",
+             q[0], q[1], q[2], det);
+        return SINGULAR_POSE;
     }
     arm_jacobian(arm, q, j);
     if (solve3(j, xv_dot, qd_v)) { /* Python: ZeroDivisionError in linalg3.solve */
@@ -322,6 +324,21 @@ static int impedance_terms(const Params *p, const double q[3], const double yhat
     return 0;
 }
 
+/* gravity_hold_terms: gravity compensation alone, with e and J yhat (sample 0 at a singular
+ * pose, where eq. 10 is undefined) */
+static void gravity_hold_terms(const Params *p, const double q[3], const double yhat[3],
+                               const double xv[3], double tau[3], double e[3], double xd_hat[3])
+{
+    double j[9], pose[3];
+    arm_jacobian(&p->arm, q, j);
+    arm_kinematics(&p->arm, q, pose);
+    e[0] = pose[0] - xv[0];
+    e[1] = pose[1] - xv[1];
+    e[2] = wrap_angle(pose[2] - xv[2]);
+    arm_gravity(&p->arm, q, tau);
+    matvec(j, yhat, xd_hat);
+}
+
 /* --- the model ------------------------------------------------------------------------------- */
 
 /* ControllerModel._split: the inputs, after checking they are finite (qd_meas only when used). */
@@ -346,9 +363,10 @@ static int split_inputs(const Data *d, double q[3], double f[3], double qd_meas[
 }
 
 /* ControllerModel._sample: sample k from the state in d->m (the previous sample's) and this
- * sample's inputs; on success, updates d->m and writes the outputs to d->r. */
+ * sample's inputs; on success, updates d->m and writes the outputs to d->r. law 0: gravity
+ * compensation instead of eq. (10). Returns SINGULAR_POSE when eq. (10) is undefined. */
 static int take_sample(Data *d, const Params *p, int64_t k, const double q[3], const double f[3],
-                       const double qd_meas[3], char *msg)
+                       const double qd_meas[3], int law, char *msg)
 {
     ModelState *m = &d->m;
     const double ts = p->ts;
@@ -372,8 +390,13 @@ static int take_sample(Data *d, const Params *p, int64_t k, const double q[3], c
              : m->velocity_source == SOURCE_DIFFERENCE ? qd_diff
                                                        : qd_meas;
     virtual_trajectory(p, m->start_time + (double)k * ts, xv, xv_dot, xv_ddot);
-    if (impedance_terms(p, q, qd_hat, f, xv, xv_dot, xv_ddot, tau, e, xd_hat, msg)) {
-        return 1;
+    if (!law) {
+        gravity_hold_terms(p, q, qd_hat, xv, tau, e, xd_hat);
+    } else {
+        const int r = impedance_terms(p, q, qd_hat, f, xv, xv_dot, xv_ddot, tau, e, xd_hat, msg);
+        if (r) {
+            return r;
+        }
     }
     if (p->limit_torque) {
         for (i = 0; i < 3; i++) { /* min(m, max(-m, tau)), with Python's min/max on ties/NaN */
@@ -455,9 +478,25 @@ int model_initialize(Data *d, char *msg)
     if (split_inputs(d, q, f, qd_meas, msg)) {
         return 1;
     }
-    /* Sample 0, from the inputs at initialization (previous sample: zeros, unused at k = 0) */
-    if (take_sample(d, &p, 0, q, f, qd_meas, msg)) {
-        return 1;
+    /* Sample 0, from the inputs at initialization (previous sample: zeros, unused at k = 0).
+     * Any finite inputs initialize: at a singular pose, gravity compensation only, and the
+     * message (a warning: the glue logs a message left by a successful model_initialize). */
+    {
+        const int r = take_sample(d, &p, 0, q, f, qd_meas, 1, msg);
+        if (r == SINGULAR_POSE) {
+            char reason[MSG_MAX];
+            snprintf(reason, sizeof reason, "%s", msg);
+            float_repr(d->start_time, buf[0], sizeof buf[0]);
+            if (take_sample(d, &p, 0, q, f, qd_meas, 0, msg)) {
+                return 1;
+            }
+            snprintf(msg, MSG_MAX,
+                     "%.300s: at initialization (t=%s) the torque is gravity compensation only,"
+                     " tau = g(q); a step that samples at a singular pose is refused",
+                     reason, buf[0]);
+        } else if (r) {
+            return 1;
+        }
     }
     m->t = m->start_time;
     m->k_next = 1;
@@ -511,7 +550,7 @@ int model_step(Data *d, double t, double h, char *msg)
         if (m->start_time + (double)k * p.ts > t + tol) {
             held += 1; /* strictly inside the step: the inputs at t are reused */
         }
-        if (take_sample(d, &p, k, q, f, qd_meas, msg)) {
+        if (take_sample(d, &p, k, q, f, qd_meas, 1, msg)) {
             return 1;
         }
     }
@@ -618,7 +657,7 @@ int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
             if (m->start_time + (double)k * p.ts < t - tol) {
                 m->held_input_samples += 1;
             }
-            if (take_sample(d, &p, k, q, f, qd_meas, msg)) {
+            if (take_sample(d, &p, k, q, f, qd_meas, 1, msg)) {
                 return 1;
             }
         }

@@ -148,8 +148,15 @@ static int initialize(Instance *inst)
             return 1;
         }
     }
+    inst->msg[0] = '\0';
     if (model_initialize(&tmp, inst->msg)) {
         return 1;
+    }
+    /* a message left by a successful model_initialize is a warning (e.g. the controller's
+     * sample 0 at a singular pose): logged, and initialization goes on (status OK) */
+    if (inst->msg[0] != '\0') {
+        log_message(inst, fmi2Warning, "logStatusWarning", "%s", inst->msg);
+        inst->msg[0] = '\0';
     }
     if (inst->type == fmi2ModelExchange && me_initialize(&tmp, inst->msg)) {
         return 1;

@@ -1,7 +1,7 @@
 """The robot description (physics/description.py) and its files (packaging/robot_files.py): the
 bodies alone rebuild arm.py's H, g, kinematics and J (a planar chain computed here, from the
 links' centre-of-mass Jacobians), and MuJoCo loading the MJCF gives arm.py's terms to 1e-10 at
-random states (packaging/robot_check.py)."""
+random states, and so does Pinocchio loading the URDF (packaging/robot_check.py)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,17 @@ from dataclasses import replace
 
 import mujoco
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from impedance_cosim.packaging import robot_check
-from impedance_cosim.packaging.robot_files import MJCF_NAME, mjcf, start_poses, write_robot_files
+from impedance_cosim.packaging.robot_files import (
+    MJCF_NAME,
+    URDF_NAME,
+    mjcf,
+    start_poses,
+    write_robot_files,
+)
 from impedance_cosim.physics.arm import Arm, ArmParams
 from impedance_cosim.physics.description import TOOL_RADIUS, describe
 from impedance_cosim.physics.wall import WallParams
@@ -164,3 +171,37 @@ def test_numbers_are_written_exactly(written, robot_dir):
     root = ET.fromstring(mjcf(describe(odd)))
     inertial = root.find(".//body[@name='link2']/inertial")
     assert [float(v) for v in inertial.get("diaginertia").split()] == [0.1 + 0.2] * 3
+
+
+def test_urdf_loads_in_pinocchio(written, robot_dir):
+    model = pin.buildModelFromUrdf(str(robot_dir / URDF_NAME))
+    assert (model.nq, model.nv) == (6, 3)  # continuous joints: (cos q, sin q) each
+    assert list(model.names)[1:] == ["q1", "q2", "q3"]
+    assert list(model.damping) == [27.4, 4.54, 5.0]
+    assert list(model.armature) == [0.0, 0.0, 0.0]  # URDF cannot carry the motor inertias
+    for frame in ("tool", "wall", "link3"):
+        assert model.existFrame(frame)
+
+
+def test_pinocchio_gives_our_terms(written, robot_dir):
+    worst = robot_check.pinocchio_differences(robot_dir / URDF_NAME, poses=200)
+    assert set(worst) == {*robot_check.TERMS, "out_of_plane"}
+    assert max(worst.values()) < TOL, worst
+
+
+def test_the_urdf_check_sees_a_wrong_file(tmp_path):
+    """A URDF with a longer tool: the kinematics and J differ, H and g (no tool mass) do not."""
+    write_robot_files(tmp_path, replace(ArmParams(), a3=0.16))
+    worst = robot_check.pinocchio_differences(tmp_path / URDF_NAME, poses=5)
+    assert worst["fk"] > 1e-3 and worst["J"] > 1e-3
+    assert worst["H"] < TOL and worst["g"] < TOL
+
+
+def test_the_motor_inertias_matter(written, robot_dir):
+    """Without model.armature set after loading, Pinocchio's H misses I_m on the diagonal."""
+    model = robot_check.pinocchio_model(robot_dir / URDF_NAME)
+    model.armature = np.zeros(3)
+    q = STATES[0][0]
+    h = pin.crba(model, model.createData(), robot_check.pinocchio_q(q))
+    missing = np.diag(np.array(Arm().inertia(tuple(q))) - np.triu(h) - np.triu(h, 1).T)
+    assert np.abs(missing - (4.71, 0.830, 0.179)).max() < TOL

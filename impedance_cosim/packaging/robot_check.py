@@ -83,10 +83,64 @@ def mujoco_differences(
     model = mujoco.MjModel.from_xml_path(str(mjcf_path))
     model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT  # the free arm (qdd)
     data = mujoco.MjData(model)
+    return _differences(lambda q, qd, tau: mujoco_terms(model, data, q, qd, tau),
+                        params, poses, seed)  # fmt: skip
+
+
+def pinocchio_model(urdf_path: Path, params: ArmParams | None = None):
+    """Pinocchio's model of the URDF, completed with what URDF cannot say: the motor inertias
+    (model.armature, kg m^2) and gravity along -y (model.gravity)."""
+    import pinocchio as pin
+
+    p = params if params is not None else ArmParams()
+    model = pin.buildModelFromUrdf(str(urdf_path))
+    model.armature = np.array([p.Im1, p.Im2, p.Im3])
+    model.gravity = pin.Motion(np.array([0.0, -p.g, 0.0]), np.zeros(3))
+    return model
+
+
+def pinocchio_q(q: np.ndarray) -> np.ndarray:
+    """Pinocchio's configuration of our joint angles: a URDF continuous joint is (cos q, sin q)."""
+    return np.ravel([(math.cos(a), math.sin(a)) for a in q])
+
+
+def pinocchio_terms(model, data, q, qd, tau) -> dict[str, np.ndarray]:
+    """Our terms as Pinocchio computes them for the URDF model at one state. Its RNEA and ABA
+    do not apply model.damping: the viscous friction is subtracted from tau here."""
+    import pinocchio as pin
+
+    qp, zero = pinocchio_q(q), np.zeros(3)
+    upper = np.triu(pin.crba(model, data, qp))  # with model.armature on the diagonal
+    gravity = pin.computeGeneralizedGravity(model, data, qp).copy()
+    bias = pin.rnea(model, data, qp, qd, zero).copy()  # C(q, qd) qd + g(q)
+    tool = model.getFrameId("tool")
+    pin.framesForwardKinematics(model, data, qp)
+    frame = data.oMf[tool]
+    pos, rot = frame.translation.copy(), frame.rotation.copy()
+    jac = pin.computeFrameJacobian(model, data, qp, tool, pin.LOCAL_WORLD_ALIGNED)
+    out_of_plane = max(abs(pos[2]), np.abs(jac[2:5]).max())
+    qdd = pin.aba(model, data, qp, qd, tau - model.damping * qd).copy()
+    return {"H": upper + np.triu(upper, 1).T, "g": gravity, "Cqd": bias - gravity,
+            "J": jac[[0, 1, 5]], "fk": np.array([pos[0], pos[1], math.atan2(rot[1, 0], rot[0, 0])]),
+            "qdd": qdd, "out_of_plane": np.array([out_of_plane])}  # fmt: skip
+
+
+def pinocchio_differences(
+    urdf_path: Path, params: ArmParams | None = None, poses: int = 200, seed: int = 1
+) -> dict[str, float]:
+    """The largest |Pinocchio - arm.py| of each term over `poses` random states (plus
+    out_of_plane, as mujoco_differences)."""
+    model = pinocchio_model(urdf_path, params)
+    data = model.createData()
+    return _differences(lambda q, qd, tau: pinocchio_terms(model, data, q, qd, tau),
+                        params, poses, seed)  # fmt: skip
+
+
+def _differences(terms, params, poses, seed) -> dict[str, float]:
     arm = Arm(params)
     worst = dict.fromkeys((*TERMS, "out_of_plane"), 0.0)
     for q, qd, tau in random_states(poses, seed):
-        theirs = mujoco_terms(model, data, q, qd, tau)
+        theirs = terms(q, qd, tau)
         ours = _ours(arm, q, qd, tau)
         for name in TERMS:
             worst[name] = max(worst[name], _difference(name, theirs[name], ours[name]))
@@ -97,7 +151,7 @@ def mujoco_differences(
 def main(argv: list[str] | None = None) -> int:
     """Write the files for the plant's parameters into a temporary folder and print the
     differences per library and term."""
-    from impedance_cosim.packaging.robot_files import MJCF_NAME, write_robot_files
+    from impedance_cosim.packaging.robot_files import MJCF_NAME, URDF_NAME, write_robot_files
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--poses", type=int, default=200, help="random states (default 200)")
@@ -106,7 +160,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--poses must be >= 1 (got {args.poses})")
     with tempfile.TemporaryDirectory(prefix="impcosim_robot_") as tmp:
         write_robot_files(Path(tmp))
-        rows = {"MuJoCo (MJCF)": mujoco_differences(Path(tmp) / MJCF_NAME, poses=args.poses)}
+        rows = {
+            "MuJoCo (MJCF)": mujoco_differences(Path(tmp) / MJCF_NAME, poses=args.poses),
+            "Pinocchio (URDF)": pinocchio_differences(Path(tmp) / URDF_NAME, poses=args.poses),
+        }
     print(f"largest difference from arm.py over {args.poses} random states:")
     for library, worst in rows.items():
         print(f"  {library}: " + ", ".join(f"{k} {v:.1e}" for k, v in worst.items()))

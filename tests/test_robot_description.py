@@ -6,6 +6,8 @@ random states, and so does Pinocchio loading the URDF (packaging/robot_check.py)
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import replace
 
@@ -205,3 +207,27 @@ def test_the_motor_inertias_matter(written, robot_dir):
     h = pin.crba(model, model.createData(), robot_check.pinocchio_q(q))
     missing = np.diag(np.array(Arm().inertia(tuple(q))) - np.triu(h) - np.triu(h, 1).T)
     assert np.abs(missing - (4.71, 0.830, 0.179)).max() < TOL
+
+
+CHILD = """
+import resource, signal, sys
+from pathlib import Path
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write beyond the limit fails with EFBIG
+from impedance_cosim.packaging.robot_files import write_robot_files
+resource.setrlimit(resource.RLIMIT_FSIZE, (1000, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+try:
+    write_robot_files(Path(sys.argv[1]))
+except OSError as exc:
+    print(type(exc).__name__, exc)
+    sys.exit(1)
+"""
+
+
+def test_no_room_leaves_no_partial_file(tmp_path):
+    """A 1 kB file size limit (the MJCF is ~2 kB): one error naming the file, nothing under its
+    name and no temporary file."""
+    done = subprocess.run([sys.executable, "-c", CHILD, str(tmp_path)], capture_output=True,
+                          text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    assert done.stdout.startswith(f"ArchiveWriteError cannot write {MJCF_NAME} in {tmp_path}:")
+    assert list(tmp_path.iterdir()) == []

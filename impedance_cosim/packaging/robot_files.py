@@ -15,6 +15,7 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from impedance_cosim.packaging.archive_out import NO_ROOM, ArchiveWriteError
 from impedance_cosim.physics.arm import Arm, ArmParams
 from impedance_cosim.physics.description import (
     TOOL_RADIUS,
@@ -23,6 +24,7 @@ from impedance_cosim.physics.description import (
     describe,
 )
 from impedance_cosim.physics.wall import WallParams
+from impedance_cosim.util import atomic
 
 URDF_NAME = "puma3.urdf"
 MJCF_NAME = "puma3.xml"
@@ -150,12 +152,19 @@ def write_robot_files(
     out_dir: Path, arm: ArmParams | None = None, wall: WallParams | None = None
 ) -> list[Path]:
     """Write out_dir/puma3.xml (MJCF) and out_dir/puma3.urdf for these parameters (default: the
-    plant's); their paths."""
+    plant's); their paths. Each file is whole or not there: no room raises ArchiveWriteError (as
+    the build's archives), which names the file."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     desc = describe(arm, wall)
     keys = {k: tuple(v) for k, v in start_poses(arm).items()}
     files = {MJCF_NAME: mjcf(desc, keys), URDF_NAME: urdf(desc)}
     for name, text in files.items():
-        (out_dir / name).write_text(text, encoding="utf-8")
+        try:
+            with atomic.atomic_write(out_dir / name, encoding="utf-8") as f:
+                f.write(text)
+        except atomic.WriteError as exc:
+            if exc.errno in NO_ROOM:
+                raise ArchiveWriteError(out_dir / name, exc.reason, exc.errno) from None
+            raise
     return [out_dir / name for name in files]

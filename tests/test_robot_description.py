@@ -231,3 +231,28 @@ def test_no_room_leaves_no_partial_file(tmp_path):
     assert done.returncode == 1, done.stderr
     assert done.stdout.startswith(f"ArchiveWriteError cannot write {MJCF_NAME} in {tmp_path}:")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_check_without_the_libraries_says_so():
+    """robot_check without mujoco installed: one line naming the extra, exit 1, no traceback."""
+    child = (
+        "import sys; sys.modules['mujoco'] = None\n"
+        "from impedance_cosim.packaging.robot_check import main\nsys.exit(main([]))"
+    )
+    done = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True,
+                          timeout=120)  # fmt: skip
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and "impedance-cosim[robotics]" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_plant_documentation_says_where_the_conventions_go():
+    """The plant FMU's documentation page names the files and where I_u, I_m, F, gravity, the
+    tool point, the wall and the elbow-up start go in them."""
+    from impedance_cosim.packaging.model_docs import model_section
+
+    page = model_section("PumaPlant", {})
+    for text in (f"fmus/robot/{MJCF_NAME}", URDF_NAME, "<code>armature</code>",
+                 "<code>model.armature</code>", "joint damping", "(0, −g, 0)",
+                 "<code>tool</code>", "fixed body", "<code>elbow_up</code>"):  # fmt: skip
+        assert text in page, text

@@ -76,6 +76,14 @@ force the end effector exerts on the environment (F<sub>au</sub> of the controll
 for the frictionless point contact.</p>
 <p><b>Initial state.</b> At rest at the pose (x0, y0, phi0) = (0.3 m, 0 m, 0 rad) by inverse
 kinematics, elbow above the shoulder-wrist line when <code>elbow_up</code> (q₂ &lt; 0).</p>
+<p><b>In robotics tools.</b> The same arm as MJCF (MuJoCo) and URDF, written from these
+parameters by <code>impedance-cosim build</code> (fmus/robot/puma3.xml, puma3.urdf): link i's
+frame on joint i, x along the link, every joint about +z; I<sub>u</sub> as the inertia about each
+link's centre of mass (r<sub>x</sub>, r<sub>y</sub>); I<sub>m</sub> as rotor inertia (MJCF
+<code>armature</code>; URDF has none: Pinocchio's <code>model.armature</code>); F as joint damping;
+gravity (0, −g, 0) (URDF: set after loading); the tool point as site/frame <code>tool</code>; the
+wall as a fixed body at x<sub>w</sub>; the elbow-up start as MJCF keyframe
+<code>elbow_up</code>. Checked against this model to 10⁻¹⁰ (the project's docs/robotics.md).</p>
 <p><b>Integration.</b> Each doStep holds the torque and integrates (1) with an adaptive
 Dormand-Prince 5(4) (tolerances <code>rtol</code>, <code>atol</code>) that stops exactly where the
 contact closes or opens, so results do not depend on the communication step.</p>

@@ -153,11 +153,19 @@ def main(argv: list[str] | None = None) -> int:
     differences per library and term."""
     from impedance_cosim.packaging.robot_files import MJCF_NAME, URDF_NAME, write_robot_files
 
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m impedance_cosim.packaging.robot_check",
+                                     description=__doc__.split("\n\n")[0])  # fmt: skip
     parser.add_argument("--poses", type=int, default=200, help="random states (default 200)")
     args = parser.parse_args(argv)
     if args.poses < 1:
         parser.error(f"--poses must be >= 1 (got {args.poses})")
+    try:
+        import mujoco  # noqa: F401
+        import pinocchio  # noqa: F401
+    except ImportError as exc:
+        print(f"robot_check: needs mujoco and pin ({exc}): pip install 'impedance-cosim[robotics]'",
+              file=sys.stderr)  # fmt: skip
+        return 1
     with tempfile.TemporaryDirectory(prefix="impcosim_robot_") as tmp:
         write_robot_files(Path(tmp))
         rows = {

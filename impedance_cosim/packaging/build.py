@@ -37,6 +37,7 @@ class FmuSpec:
     script: str  # slave script file in the package, e.g. PumaPlant.py
     model_class: str  # dotted path of the FmuModel class
     uses: tuple[str, ...] = ()  # other model packages bundled with it (their code, not slaves)
+    resources: tuple[str, ...] = ()  # robot description files it carries (robot_files.py)
 
     @property
     def model_name(self) -> str:
@@ -61,6 +62,13 @@ FMUS = {
         "BridgePlant.py",
         "bridge_model.model.BridgeModel",
         uses=("plant_model",),  # the plant's interface, defined once in plant_model.model
+    ),
+    "pinocchio": FmuSpec(
+        "pinocchio",
+        "plant_model",
+        "PinocchioPlant.py",
+        "plant_model.urdf_plant.PinocchioPlantModel",
+        resources=("puma3.urdf",),  # the arm it loads with Pinocchio (plant_model/urdf_plant.py)
     ),
 }
 
@@ -88,6 +96,21 @@ def stage_core(stage: Path) -> Path:
     return core
 
 
+def _stage_resources(spec: FmuSpec, package: Path, scratch: Path) -> str:
+    """Copy the robot description files spec carries into its staged package (so the FMU's
+    resources hold them beside its code); their text, for the content tag."""
+    if not spec.resources:
+        return ""
+    from impedance_cosim.packaging.robot_files import write_robot_files
+
+    written = {f.name: f for f in write_robot_files(scratch)}
+    text = ""
+    for name in spec.resources:
+        shutil.copy2(written[name], package / name)
+        text += written[name].read_text(encoding="utf-8")
+    return text
+
+
 def build_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT) -> Path:
     """Build one FMU into out_dir and return its path."""
     from pythonfmu import FmuBuilder  # build-time dependency only
@@ -98,12 +121,13 @@ def build_fmu(spec: FmuSpec, out_dir: Path = DEFAULT_OUT) -> Path:
     with tempfile.TemporaryDirectory(prefix="impcosim_build_") as tmp:
         stage = Path(tmp) / "stage"
         core = stage_core(stage)
-        _stage(package_dir, stage / spec.package, skip={spec.script})
         slaves = {s.script for s in FMUS.values()}
+        _stage(package_dir, stage / spec.package, skip=slaves)  # no slave script but its own
         for package in spec.uses:
             _stage(REPO / package, stage / package, skip=slaves)
         script = package_dir / spec.script
-        tag = content_tag(stage, script.read_text())
+        carried = _stage_resources(spec, stage / spec.package, Path(tmp) / "robot")
+        tag = content_tag(stage, script.read_text() + carried)  # the files' text in the tag
         slave = isolate(stage, script, tag)  # module names of this build's own (isolate.py)
         packages = [core.name, spec.package, *spec.uses]
         raw = FmuBuilder.build_FMU(

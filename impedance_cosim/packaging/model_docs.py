@@ -122,6 +122,15 @@ law is chosen by <code>velocity_source</code>: observer (the paper), difference 
 Optional torque limits (<code>limit_torque</code>): the observer then uses the clipped torque.</p>
 """
 
+PINOCCHIO = """
+<p><b>PinocchioPlant</b> is PumaPlant below with the arm's forward dynamics (ABA), the tool
+point's position and Jacobian computed by Pinocchio from the URDF it carries
+(resources/…/puma3.urdf), its numbers set from the parameters (the motor inertias as
+<code>model.armature</code>, gravity along −y): a second, independent plant to swap in. It needs
+Pinocchio (<code>pip install pin==4.1.0</code>) and numpy in the Python that runs it; without
+them instantiation fails, saying so. The wall, sensors and integrator are PumaPlant's.</p>
+"""
+
 BRIDGE = """
 <p>A hardware-in-the-loop bridge with PumaPlant's interface (the same parameters, inputs and
 outputs). It simulates nothing: at initialization it sends the plant parameters to an external
@@ -137,8 +146,9 @@ return fmi2Discard with the cause logged; every wait is bounded (<code>timeout_s
 def model_section(model_name: str, starts: dict[str, dict[str, str]]) -> str:
     """The 'what the model is' part of index.html for a model, with its numbers."""
     arm = ARM.format(arm=_nums(starts, ARM_NAMES))
-    if model_name == "PumaPlant":
-        return PLANT.format(arm=arm, wall=_nums(starts, ["wall_x", "wall_k", "wall_d"]))
+    if model_name in ("PumaPlant", "PinocchioPlant"):
+        page = PLANT.format(arm=arm, wall=_nums(starts, ["wall_x", "wall_k", "wall_d"]))
+        return page if model_name == "PumaPlant" else PINOCCHIO + page
     if model_name == "ImpedanceController":
         traj = _nums(starts, ["traj_cx", "traj_cy", "traj_ax", "traj_ay", "traj_f", "traj_phi",
                               "wall_x", "wall_depth"])  # fmt: skip

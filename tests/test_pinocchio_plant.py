@@ -6,6 +6,7 @@ it fails with one line saying so."""
 from __future__ import annotations
 
 import csv
+import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -144,3 +145,20 @@ def test_the_dynamics_are_pinocchios(bundled):
     model.robot.armature = np.zeros(3)
     ours = free_motion(PlantModel({}), 100)
     assert np.abs(free_motion(model, 100) - ours).max() > 1e-3
+
+
+def test_swap_without_pinocchio_fails_in_one_line(fmu_dir, ssp_path, tmp_path):
+    """The run command with PinocchioPlant where Pinocchio cannot be imported: exit status 1 and
+    one error line naming what is missing."""
+    hidden = tmp_path / "hidden" / "pinocchio"
+    hidden.mkdir(parents=True)
+    (hidden / "__init__.py").write_text('raise ImportError("No module named pinocchio (hidden)")')
+    env = {**os.environ, "PYTHONPATH": str(hidden.parent)}
+    argv = [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
+            f"plant={fmu_dir}/PinocchioPlant.fmu", "--stop", "0.1", "--out", str(tmp_path / "out"),
+            "--no-figures", "--no-report", "--no-progress"]  # fmt: skip
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 1, done.stderr
+    errors = [line for line in done.stderr.splitlines() if "error:" in line]
+    assert errors[-1].startswith("impedance-cosim swap: error: ") and "Traceback" not in done.stderr
+    assert "PinocchioPlant needs the Python package pin" in errors[-1]

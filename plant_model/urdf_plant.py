@@ -3,8 +3,10 @@
 A second, independent plant to swap in (issue 25): the same variables as PumaPlant (inputs,
 outputs, units, parameters), the same wall law, sensors and integrator (plant_model.model), but
 the forward dynamics (Pinocchio's ABA), the tool point's position and Jacobian (its frame `tool`)
-come from Pinocchio's model of the URDF that the FMU carries (resources: puma3.urdf, written by
-packaging/robot_files.py from the plant's default parameters). The FMU's arm parameters then set
+come from Pinocchio's model of the URDF that the FMU carries (puma3.urdf, written by
+packaging/robot_files.py from the plant's default parameters; the build puts it beside this code
+as the generated module carried_files.py: code, so Python's module cache can never pair this
+module with another build's file). The FMU's arm parameters then set
 the numbers through Pinocchio's model (joint placements, link inertias, the tool frame, rotor
 inertias, damping, gravity): pinocchio_arm() gives the same model as a URDF written with them
 (tests/test_pinocchio_plant.py). What URDF cannot say, the motor inertias and gravity along -y,
@@ -17,7 +19,6 @@ runs the FMU; without it the instantiation fails with one line saying so.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 from impedance_cosim.fmi.model import ModelError
@@ -26,20 +27,30 @@ from impedance_cosim.physics.ode import IntegrationError
 from impedance_cosim.physics.wall import contact_event, contact_force_law, wall_force
 from plant_model.model import PlantModel
 
-URDF_FILE = "puma3.urdf"  # beside this module in the FMU (resources/)
-URDF_PATH = Path(__file__).with_name(URDF_FILE)
+URDF_FILE = "puma3.urdf"
+try:  # imported with this module (a later import could not find a build's deleted stage)
+    from plant_model.carried_files import FILES as CARRIED  # generated into the FMU by the build
+except ImportError:  # the checkout: only the build writes it
+    CARRIED: dict[str, str] = {}
 NEEDS = "the Python package pin (Pinocchio 4.1: pip install pin==4.1.0) in the Python running it"
 
 
-def pinocchio_arm(pin: Any, urdf: Path, desc: RobotDescription) -> Any:
+def carried_urdf() -> str:
+    """The URDF the FMU carries (ModelError outside a built FMU: only the build writes it)."""
+    if URDF_FILE not in CARRIED:
+        raise ModelError(f"{URDF_FILE} is missing (the FMU carries it: rebuild the FMU)")
+    return CARRIED[URDF_FILE]
+
+
+def pinocchio_arm(pin: Any, urdf: str, desc: RobotDescription) -> Any:
     """Pinocchio's model of the URDF with desc's numbers: joint placements, link inertias about
     their centres of mass, the tool frame, rotor inertias (armature), damping, gravity along -y."""
     import numpy as np
 
-    model = pin.buildModelFromUrdf(str(urdf))
+    model = pin.buildModelFromXML(urdf)
     names = [link.joint for link in desc.links]
     if list(model.names)[1:] != names:
-        raise ValueError(f"{urdf.name}: joints {list(model.names)[1:]}, expected {names}")
+        raise ValueError(f"joints {list(model.names)[1:]}, expected {names}")
     for j, link in enumerate(desc.links, start=1):
         model.jointPlacements[j] = pin.SE3(np.eye(3), np.array([*link.origin, 0.0]))
         model.inertias[j] = pin.Inertia(link.mass, np.array([*link.com, 0.0]),
@@ -70,10 +81,9 @@ class PinocchioPlantModel(PlantModel):
             import pinocchio as pin
         except ImportError as exc:
             raise ModelError(f"PinocchioPlant needs {NEEDS} ({exc})") from None
-        if not URDF_PATH.is_file():
-            raise ModelError(f"{URDF_PATH} is missing (the FMU carries it: rebuild the FMU)")
+        urdf = carried_urdf()
         try:
-            self.robot = pinocchio_arm(pin, URDF_PATH, describe(self.arm.params, self.wall))
+            self.robot = pinocchio_arm(pin, urdf, describe(self.arm.params, self.wall))
         except (ValueError, RuntimeError) as exc:
             raise ModelError(f"{URDF_FILE} cannot be loaded: {exc}") from None
         self._np, self._pin = np, pin

@@ -5,10 +5,12 @@ it fails with one line saying so."""
 
 from __future__ import annotations
 
+import ast
 import csv
 import os
 import subprocess
 import sys
+import zipfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -40,8 +42,8 @@ def default_urdf(tmp_path_factory) -> Path:
 
 @pytest.fixture
 def bundled(default_urdf, monkeypatch):
-    """The model run in this process, reading the URDF as the FMU does (beside its module)."""
-    monkeypatch.setattr(urdf_plant, "URDF_PATH", default_urdf)
+    """The model run in this process, with the URDF the FMU carries."""
+    monkeypatch.setattr(urdf_plant, "carried_urdf", default_urdf.read_text)
 
 
 def test_parameters_set_what_a_urdf_with_them_says(default_urdf, tmp_path):
@@ -49,7 +51,7 @@ def test_parameters_set_what_a_urdf_with_them_says(default_urdf, tmp_path):
     written with the changed numbers (and both what arm.py computes with them)."""
     write_robot_files(tmp_path, CHANGED)
     from_file = robot_check.pinocchio_model(tmp_path / URDF_NAME, CHANGED)
-    ours = pinocchio_arm(pin, default_urdf, describe(CHANGED))
+    ours = pinocchio_arm(pin, default_urdf.read_text(), describe(CHANGED))
     assert list(ours.damping) == [CHANGED.f1, CHANGED.f2, CHANGED.f3]
     d1, d2 = from_file.createData(), ours.createData()
     for q, qd, tau in robot_check.random_states(30, seed=3):
@@ -85,10 +87,19 @@ def test_same_variables_as_pumaplant():
     assert PinocchioPlantModel.variables() == PlantModel.variables()
 
 
-def test_a_missing_urdf_is_named(monkeypatch, tmp_path):
-    monkeypatch.setattr(urdf_plant, "URDF_PATH", tmp_path / URDF_NAME)
+def test_outside_an_fmu_the_missing_urdf_is_named():
+    """Only the build writes carried_files.py: the model run from the checkout says so."""
     with pytest.raises(ModelError, match=r"puma3.urdf is missing \(the FMU carries it"):
         PinocchioPlantModel({})
+
+
+def test_the_fmu_carries_the_plants_urdf(fmu_dir, default_urdf):
+    """The carried URDF is the one `build` writes from the plant's parameters."""
+    with zipfile.ZipFile(fmu_dir / "PinocchioPlant.fmu") as z:
+        name = next(n for n in z.namelist() if n.endswith("/carried_files.py"))
+        source = z.read(name).decode()
+    files = ast.literal_eval(source.split("FILES = ", 1)[1])
+    assert files == {URDF_NAME: default_urdf.read_text()}
 
 
 def read(path: Path) -> dict[str, np.ndarray]:
@@ -120,6 +131,7 @@ def test_swap_runs_the_paper_scenario_as_pumaplant(fmu_dir, ssp_path, tmp_path):
 
 CHILD = """
 import sys
+import zipfile
 sys.modules["pinocchio"] = None  # as if Pinocchio were not installed
 from fmpy import simulate_fmu
 try:
@@ -162,3 +174,58 @@ def test_swap_without_pinocchio_fails_in_one_line(fmu_dir, ssp_path, tmp_path):
     errors = [line for line in done.stderr.splitlines() if "error:" in line]
     assert errors[-1].startswith("impedance-cosim swap: error: ") and "Traceback" not in done.stderr
     assert "PinocchioPlant needs the Python package pin" in errors[-1]
+
+
+def test_default_experiment_matches_pumaplants_reference(fmu_dir, tmp_path):
+    """`fmpy simulate` on its own (the 20 s default experiment: the arm falls, swings, hangs):
+    PumaPlant's reference result (PumaPlant_ref.csv) to 1e-9."""
+    from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
+
+    out = tmp_path / "out.csv"
+    subprocess.run(["fmpy", "simulate", str(fmu_dir / "PinocchioPlant.fmu"), "--output-interval",
+                    "0.0025", "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
+    rows = read(out)
+    ref = read_csv(next(p for p in REFERENCES if p.name == "PumaPlant_ref.csv"))
+    assert len(rows["time"]) == 8001
+    assert compare({k: v[::40] for k, v in rows.items()}, ref, rtol=1e-9) == []
+
+
+def test_state_restore_in_contact_is_bit_identical(fmu_dir):
+    """Pushed into the wall (noisy encoders): step, save, step, restore, step again, also into a
+    second instance through serialization: identical outputs."""
+    from impedance_cosim.cosim.fmu import FmuInstance
+
+    def started(name):
+        fmu = FmuInstance(fmu_dir / "PinocchioPlant.fmu", name)
+        fmu.setup(0.0)
+        fmu.set({"x0": 0.649, "q_noise": 1e-4})
+        fmu.enter_initialization()
+        fmu.exit_initialization()
+        fmu.set({"tau1": 30.0, "tau2": 20.0, "tau3": 1.0})
+        return fmu
+
+    fmu = started("a")
+    outputs = [v.name for v in fmu.description.modelVariables if v.causality == "output"]
+    for i in range(40):
+        fmu.step(i / 400, 1 / 400)
+    state = fmu.get_state()
+    blob = fmu.serialize_state(state)
+
+    def run(f) -> list:
+        rows = []
+        for i in range(40, 60):
+            f.step(i / 400, 1 / 400)
+            rows.append(f.get(outputs))
+        return rows
+
+    first = run(fmu)
+    assert max(r[outputs.index("contact_force")] for r in first) > 1.0  # in contact
+    fmu.set_state(state)
+    assert run(fmu) == first
+    other = started("b")
+    other.set_state(other.deserialize_state(blob))
+    assert run(other) == first
+    fmu.free_state(state)
+    for f in (fmu, other):
+        f.terminate()
+        f.free()

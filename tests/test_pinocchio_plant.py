@@ -59,7 +59,7 @@ def test_parameters_set_what_a_urdf_with_them_says(default_urdf, tmp_path):
         b = robot_check.pinocchio_terms(ours, d2, q, qd, tau)
         for name in robot_check.TERMS:
             assert np.abs(a[name] - b[name]).max() < 1e-12, name
-    assert max(robot_check._differences(
+    assert max(robot_check.largest_differences(
         lambda q, qd, tau: robot_check.pinocchio_terms(ours, d2, q, qd, tau), CHANGED, 30, 3
     ).values()) < 1e-10  # fmt: skip
 

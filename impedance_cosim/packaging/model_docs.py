@@ -124,8 +124,8 @@ Optional torque limits (<code>limit_torque</code>): the observer then uses the c
 
 PINOCCHIO = """
 <p><b>PinocchioPlant</b> is PumaPlant below with the arm's forward dynamics (ABA), the tool
-point's position and Jacobian computed by Pinocchio from the URDF it carries
-(puma3.urdf, in resources/…/carried_files.py), its numbers set from the parameters (the motor inertias as
+point's position and Jacobian computed by Pinocchio from the URDF it carries (puma3.urdf, in
+resources/…/carried_files.py), its numbers set from the parameters (the motor inertias as
 <code>model.armature</code>, gravity along −y): a second, independent plant to swap in. It needs
 Pinocchio (<code>pip install pin==4.1.0</code>) and numpy in the Python that runs it; without
 them instantiation fails, saying so. The wall, sensors and integrator are PumaPlant's.</p>

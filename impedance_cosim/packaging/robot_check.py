@@ -12,7 +12,9 @@ import argparse
 import math
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +50,9 @@ def _difference(name: str, theirs: np.ndarray, ours: np.ndarray) -> float:
     return float(np.abs(diff).max())
 
 
-def mujoco_terms(model, data, q, qd, tau) -> dict[str, np.ndarray]:
+def mujoco_terms(
+    model: Any, data: Any, q: np.ndarray, qd: np.ndarray, tau: np.ndarray
+) -> dict[str, np.ndarray]:
     """Our terms as MuJoCo computes them for the MJCF model at one state."""
     import mujoco
 
@@ -83,11 +87,11 @@ def mujoco_differences(
     model = mujoco.MjModel.from_xml_path(str(mjcf_path))
     model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT  # the free arm (qdd)
     data = mujoco.MjData(model)
-    return _differences(lambda q, qd, tau: mujoco_terms(model, data, q, qd, tau),
+    return largest_differences(lambda q, qd, tau: mujoco_terms(model, data, q, qd, tau),
                         params, poses, seed)  # fmt: skip
 
 
-def pinocchio_model(urdf_path: Path, params: ArmParams | None = None):
+def pinocchio_model(urdf_path: Path, params: ArmParams | None = None) -> Any:
     """Pinocchio's model of the URDF, completed with what URDF cannot say: the motor inertias
     (model.armature, kg m^2) and gravity along -y (model.gravity)."""
     import pinocchio as pin
@@ -104,7 +108,9 @@ def pinocchio_q(q: np.ndarray) -> np.ndarray:
     return np.ravel([(math.cos(a), math.sin(a)) for a in q])
 
 
-def pinocchio_terms(model, data, q, qd, tau) -> dict[str, np.ndarray]:
+def pinocchio_terms(
+    model: Any, data: Any, q: np.ndarray, qd: np.ndarray, tau: np.ndarray
+) -> dict[str, np.ndarray]:
     """Our terms as Pinocchio computes them for the URDF model at one state. Its RNEA and ABA
     do not apply model.damping: the viscous friction is subtracted from tau here."""
     import pinocchio as pin
@@ -132,11 +138,17 @@ def pinocchio_differences(
     out_of_plane, as mujoco_differences)."""
     model = pinocchio_model(urdf_path, params)
     data = model.createData()
-    return _differences(lambda q, qd, tau: pinocchio_terms(model, data, q, qd, tau),
+    return largest_differences(lambda q, qd, tau: pinocchio_terms(model, data, q, qd, tau),
                         params, poses, seed)  # fmt: skip
 
 
-def _differences(terms, params, poses, seed) -> dict[str, float]:
+def largest_differences(
+    terms: Callable[[np.ndarray, np.ndarray, np.ndarray], dict[str, np.ndarray]],
+    params: ArmParams | None,
+    poses: int,
+    seed: int,
+) -> dict[str, float]:
+    """The largest |terms(q, qd, tau) - arm.py's| of each term over random states."""
     arm = Arm(params)
     worst = dict.fromkeys((*TERMS, "out_of_plane"), 0.0)
     for q, qd, tau in random_states(poses, seed):

@@ -75,7 +75,8 @@ def add_build(sub) -> None:
     p = sub.add_parser("build", help=COMMANDS["build"][0])
     p.add_argument("--out", default=str(REPO / "fmus"),
                    help="output folder (default: the repository's fmus/)")  # fmt: skip
-    p.add_argument("--only", action="append", choices=["plant", "controller", "bridge"],
+    p.add_argument("--only", action="append",
+                   choices=["plant", "controller", "bridge", "pinocchio"],
                    help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
     p.set_defaults(func=run_cmd.cmd_build)
 

@@ -13,7 +13,14 @@ import pytest
 
 from impedance_cosim.cli import main
 from impedance_cosim.packaging.build import FMUS, REPO, build_fmu, build_ssp
-from impedance_cosim.packaging.dist import DATE, NAME, build_dist, bundle, expected_members
+from impedance_cosim.packaging.dist import (
+    DATE,
+    NAME,
+    build_dist,
+    bundle,
+    expected_members,
+    robot_members,
+)
 
 ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu", "fmi3/*.fmu")
 
@@ -110,6 +117,26 @@ def test_bundle_contents(two_builds):
     assert sorted(sums) == sorted(n for n in files if n != "SHA256SUMS")
     for name, digest in sums.items():
         assert hashlib.sha256(files[name]).hexdigest() == digest, name
+
+
+def test_bundle_ships_the_robot_files(two_builds):
+    """The build writes the arm's URDF and MJCF (the plant's parameters), the same bytes twice,
+    and the bundle ships them and lists them in its README."""
+    from impedance_cosim.packaging.robot_files import mjcf, start_poses, urdf
+    from impedance_cosim.physics.description import describe
+
+    a, b = two_builds
+    expected = {
+        "robot/puma3.xml": mjcf(describe(), start_poses()),
+        "robot/puma3.urdf": urdf(describe()),
+    }
+    assert sorted(robot_members()) == sorted(expected)
+    with zipfile.ZipFile(a / "dist" / f"{NAME}.zip") as z:
+        readme = z.read(f"{NAME}/README.txt").decode()
+        for member, text in expected.items():
+            assert (a / "fmus" / member).read_text() == text == (b / "fmus" / member).read_text()
+            assert z.read(f"{NAME}/fmus/{member}") == text.encode(), member
+            assert f"fmus/{member}" in readme, member
 
 
 def test_incomplete_bundle_refused(tmp_path: Path):

@@ -45,8 +45,8 @@ TIMEOUT = 300  # s per command: an upper bound for a hang, not a duration check
 
 # At least this many are collected, so blocks cannot silently stop being run (e.g. a fence
 # renamed). Today exactly these many: change the numbers deliberately with the examples.
-MIN_COMMANDS = 39
-MIN_SNIPPETS = 6
+MIN_COMMANDS = 40
+MIN_SNIPPETS = 10
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Build everything: the Python FMUs, the native FMUs (when a C compiler is present), the system
-archives per scenario and the FMI 3.0 edition. Above build and build3, so neither imports the
-other's caller."""
+archives per scenario, the FMI 3.0 edition and the arm's robot description files (robot/).
+Above build and build3, so neither imports the other's caller."""
 
 from __future__ import annotations
 
@@ -99,4 +99,7 @@ def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
             from impedance_cosim.packaging.build3 import build_fmi3  # the FMI 3.0 edition
 
             built += build_fmi3(out_dir)
+        from impedance_cosim.packaging.robot_files import write_robot_files  # URDF and MJCF
+
+        built += write_robot_files(Path(out_dir) / "robot")
     return built

@@ -1,10 +1,10 @@
 """The distribution bundle (`impedance-cosim dist`): what a user downloads, one zip.
 
 It holds every FMU (Python and native, every platform they carry), both system archives, the
-reference results (*_ref.csv), the licence, a generated README and SHA256SUMS. It is
-reproducible: the FMUs and system archives are built with fixed dates and modes, and the bundle
-itself has sorted members, one fixed date and one fixed mode, so building twice gives the same
-bytes.
+arm's robot description files (URDF, MJCF), the reference results (*_ref.csv), the licence, a
+generated README and SHA256SUMS. It is reproducible: the FMUs and system archives are built
+with fixed dates and modes, and the bundle itself has sorted members, one fixed date and one
+fixed mode, so building twice gives the same bytes.
 """
 
 from __future__ import annotations
@@ -59,6 +59,13 @@ def expected_members() -> list[str]:
     return names + systems + (["PaperScenario-fmi3.ssp"] if native else [])
 
 
+def robot_members() -> list[str]:
+    """The arm's robot description files a complete bundle holds (relative to its fmus/)."""
+    from impedance_cosim.packaging.robot_files import MJCF_NAME, URDF_NAME
+
+    return [f"robot/{MJCF_NAME}", f"robot/{URDF_NAME}"]
+
+
 def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
     """Zip the built files (all under out_dir), the references, LICENSE, README and SHA256SUMS
     into dist_dir/<NAME>.zip, reproducibly. ValueError when an expected archive is missing."""
@@ -67,7 +74,7 @@ def bundle(files: list[Path], out_dir: Path, dist_dir: Path) -> Path:
         members[f"fmus/{Path(f).resolve().relative_to(out_dir.resolve()).as_posix()}"] = Path(
             f
         ).read_bytes()
-    missing = [m for m in expected_members() if f"fmus/{m}" not in members]
+    missing = [m for m in expected_members() + robot_members() if f"fmus/{m}" not in members]
     if missing:
         raise ValueError(
             f"the bundle is incomplete, missing {', '.join(missing)}"
@@ -121,6 +128,7 @@ def readme(members: dict[str, bytes]) -> str:
     fmus = "".join(_fmu_line(m, d) for m, d in sorted(members.items()) if m.endswith(".fmu"))
     ssps = "".join(f"  {m}\n" for m in sorted(members) if m.endswith(".ssp"))
     refs = "".join(f"  {m}\n" for m in sorted(members) if m.startswith("reference/"))
+    robots = "".join(f"  {m}\n" for m in sorted(members) if m.startswith("fmus/robot/"))
     standards = fmi_versions(members)
     title = f"{NAME}: Impedance Control Without Using Velocity Measurements, as {standards} FMUs"
     return f"""{title}
@@ -143,6 +151,10 @@ PaperScenario*-<scenario>.ssp for engines that read only SystemStructure.ssd):
 {ssps}
 Reference results (CSV; each FMU's default experiment, and the paper's 20 s closed loop):
 {refs}
+The arm for robotics tools (the plant's parameters as MJCF for MuJoCo and as URDF for Pinocchio
+and ROS tools; URDF cannot carry the motor inertias and gravity along -y: set them after
+loading, as its header comment says; the project's docs/robotics.md):
+{robots}
 Run one FMU with fmpy (pip install fmpy):
 
   fmpy simulate fmus/native/PumaPlant.fmu --output-interval 0.0025

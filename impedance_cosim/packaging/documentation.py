@@ -186,6 +186,7 @@ def _interfaces_section(root: ET.Element, members: list[str]) -> str:
 # A parameter change worth showing in each model's fmpy command line.
 EXAMPLES = {
     "PumaPlant": "q_noise 1e-4 noise_seed 7",
+    "PinocchioPlant": "q_noise 1e-4 noise_seed 7",
     "ImpedanceController": "K1 80 K2 80 K3 80",
     "BridgePlant": "robot_port 50400",
 }

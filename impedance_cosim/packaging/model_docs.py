@@ -76,6 +76,14 @@ force the end effector exerts on the environment (F<sub>au</sub> of the controll
 for the frictionless point contact.</p>
 <p><b>Initial state.</b> At rest at the pose (x0, y0, phi0) = (0.3 m, 0 m, 0 rad) by inverse
 kinematics, elbow above the shoulder-wrist line when <code>elbow_up</code> (q₂ &lt; 0).</p>
+<p><b>In robotics tools.</b> The same arm as MJCF (MuJoCo) and URDF, written from these
+parameters by <code>impedance-cosim build</code> (fmus/robot/puma3.xml, puma3.urdf): link i's
+frame on joint i, x along the link, every joint about +z; I<sub>u</sub> as the inertia about each
+link's centre of mass (r<sub>x</sub>, r<sub>y</sub>); I<sub>m</sub> as rotor inertia (MJCF
+<code>armature</code>; URDF has none: Pinocchio's <code>model.armature</code>); F as joint damping;
+gravity (0, −g, 0) (URDF: set after loading); the tool point as site/frame <code>tool</code>; the
+wall as a fixed body at x<sub>w</sub>; the elbow-up start as MJCF keyframe
+<code>elbow_up</code>. Checked against this model to 10⁻¹⁰ (the project's docs/robotics.md).</p>
 <p><b>Integration.</b> Each doStep holds the torque and integrates (1) with an adaptive
 Dormand-Prince 5(4) (tolerances <code>rtol</code>, <code>atol</code>) that stops exactly where the
 contact closes or opens, so results do not depend on the communication step.</p>
@@ -117,6 +125,15 @@ chosen by <code>velocity_source</code>: observer (the paper), difference or meas
 Optional torque limits (<code>limit_torque</code>): the observer then uses the clipped torque.</p>
 """
 
+PINOCCHIO = """
+<p><b>PinocchioPlant</b> is PumaPlant below with the arm's forward dynamics (ABA), the tool
+point's position and Jacobian computed by Pinocchio from the URDF it carries (puma3.urdf, in
+resources/…/carried_files.py), its numbers set from the parameters (the motor inertias as
+<code>model.armature</code>, gravity along −y): a second, independent plant to swap in. It needs
+Pinocchio (<code>pip install pin==4.1.0</code>) and numpy in the Python that runs it; without
+them instantiation fails, saying so. The wall, sensors and integrator are PumaPlant's.</p>
+"""
+
 BRIDGE = """
 <p>A hardware-in-the-loop bridge with PumaPlant's interface (the same parameters, inputs and
 outputs). It simulates nothing: at initialization it sends the plant parameters to an external
@@ -132,8 +149,9 @@ return fmi2Discard with the cause logged; every wait is bounded (<code>timeout_s
 def model_section(model_name: str, starts: dict[str, dict[str, str]]) -> str:
     """The 'what the model is' part of index.html for a model, with its numbers."""
     arm = ARM.format(arm=_nums(starts, ARM_NAMES))
-    if model_name == "PumaPlant":
-        return PLANT.format(arm=arm, wall=_nums(starts, ["wall_x", "wall_k", "wall_d"]))
+    if model_name in ("PumaPlant", "PinocchioPlant"):
+        page = PLANT.format(arm=arm, wall=_nums(starts, ["wall_x", "wall_k", "wall_d"]))
+        return page if model_name == "PumaPlant" else PINOCCHIO + page
     if model_name == "ImpedanceController":
         traj = _nums(starts, ["traj_cx", "traj_cy", "traj_ax", "traj_ay", "traj_f", "traj_phi",
                               "wall_x", "wall_depth"])  # fmt: skip

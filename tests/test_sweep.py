@@ -260,3 +260,22 @@ def test_an_interrupted_api_sweep_keeps_its_finished_results(native_ssp, monkeyp
         assert exc.result is not None and 0 < len(exc.result.data) < 401
     else:
         assert exc.result is None
+
+
+def test_study_no_plots_draws_no_map_and_keeps_the_table(native_ssp, tmp_path):
+    """sweep --study --no-plots (issue 24): no PNG (the maps were drawn after the runs, a serial
+    tail), and the same table as the study with its maps, run for run (less wall_s)."""
+    import csv
+
+    def study(out, *extra: str) -> list[dict]:
+        argv = ["sweep", "--study", "delay", "--serial", "--ssp", str(native_ssp), "--stop",
+                "0.2", "--no-report", "--no-progress", "--out", str(out), *extra]  # fmt: skip
+        assert main(argv) == 0
+        with (out / "map_delay.csv").open(newline="") as f:
+            return [{k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(f)]
+
+    bare = study(tmp_path / "bare", "--no-plots")
+    assert not list((tmp_path / "bare").glob("*.png"))
+    drawn = study(tmp_path / "drawn")
+    assert [p.name for p in (tmp_path / "drawn").glob("*.png")] == ["map_delay.png"]
+    assert bare == drawn and len(bare) == len(sweep.STUDY["delay"].grid["system.rate"]) * 6

@@ -279,3 +279,19 @@ def test_study_no_plots_draws_no_map_and_keeps_the_table(native_ssp, tmp_path):
     drawn = study(tmp_path / "drawn")
     assert [p.name for p in (tmp_path / "drawn").glob("*.png")] == ["map_delay.png"]
     assert bare == drawn and len(bare) == len(sweep.STUDY["delay"].grid["system.rate"]) * 6
+
+
+def test_the_metrics_jacobians_are_the_arms_own():
+    """analysis.jacobians (the sweep metrics' vectorized J(q), filled in place) equals the arm's
+    J(q) of physics.arm row by row, to the last bits libm and numpy's sin/cos may differ by."""
+    import numpy as np
+
+    from impedance_cosim.apps import analysis
+    from impedance_cosim.physics.arm import Arm, ArmParams
+
+    q = np.random.default_rng(1).uniform(-3.0, 3.0, size=(50, 3))
+    got = analysis.jacobians(ArmParams(), q)
+    arm = Arm(ArmParams())
+    want = np.array([arm.jacobian(tuple(row)) for row in q])
+    assert got.shape == (50, 3, 3)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)

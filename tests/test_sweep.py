@@ -260,3 +260,38 @@ def test_an_interrupted_api_sweep_keeps_its_finished_results(native_ssp, monkeyp
         assert exc.result is not None and 0 < len(exc.result.data) < 401
     else:
         assert exc.result is None
+
+
+def test_study_no_plots_draws_no_map_and_keeps_the_table(native_ssp, tmp_path):
+    """sweep --study --no-plots (issue 24): no PNG (the maps were drawn after the runs, a serial
+    tail), and the same table as the study with its maps, run for run (less wall_s)."""
+    import csv
+
+    def study(out, *extra: str) -> list[dict]:
+        argv = ["sweep", "--study", "delay", "--serial", "--ssp", str(native_ssp), "--stop",
+                "0.2", "--no-report", "--no-progress", "--out", str(out), *extra]  # fmt: skip
+        assert main(argv) == 0
+        with (out / "map_delay.csv").open(newline="") as f:
+            return [{k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(f)]
+
+    bare = study(tmp_path / "bare", "--no-plots")
+    assert not list((tmp_path / "bare").glob("*.png"))
+    drawn = study(tmp_path / "drawn")
+    assert [p.name for p in (tmp_path / "drawn").glob("*.png")] == ["map_delay.png"]
+    assert bare == drawn and len(bare) == len(sweep.STUDY["delay"].grid["system.rate"]) * 6
+
+
+def test_the_metrics_jacobians_are_the_arms_own():
+    """analysis.jacobians (the sweep metrics' vectorized J(q), filled in place) equals the arm's
+    J(q) of physics.arm row by row, to the last bits libm and numpy's sin/cos may differ by."""
+    import numpy as np
+
+    from impedance_cosim.apps import analysis
+    from impedance_cosim.physics.arm import Arm, ArmParams
+
+    q = np.random.default_rng(1).uniform(-3.0, 3.0, size=(50, 3))
+    got = analysis.jacobians(ArmParams(), q)
+    arm = Arm(ArmParams())
+    want = np.array([arm.jacobian(tuple(row)) for row in q])
+    assert got.shape == (50, 3, 3)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)

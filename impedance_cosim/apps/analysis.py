@@ -49,9 +49,11 @@ def jacobians(p: ArmParams, q: np.ndarray) -> np.ndarray:
     x3 = p.a2 * np.sin(x0) + x2
     x4 = p.a3 * np.cos(x1)
     x5 = p.a2 * np.cos(x0) + x4
-    ones = np.ones_like(q1)
-    rows = [(-p.a1 * np.sin(q1) - x3, -x3, -x2), (p.a1 * np.cos(q1) + x5, x5, x4), (ones,) * 3]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    jac = np.empty((len(q1), 3, 3))  # filled in place: a stack of stacks copied it twice
+    jac[:, 0] = np.stack((-p.a1 * np.sin(q1) - x3, -x3, -x2), axis=-1)
+    jac[:, 1] = np.stack((p.a1 * np.cos(q1) + x5, x5, x4), axis=-1)
+    jac[:, 2] = 1.0
+    return jac
 
 
 def contact_phases(s: Signals) -> list[tuple[float, float]]:

@@ -241,7 +241,8 @@ class Master:
             for s in ordered:
                 try:
                     s.fmu.terminate()
-                    clean = error is None
+                    # a diverged run's FMUs returned no error: reset, they are reused (sweeps)
+                    clean = error is None or isinstance(error, Divergence)
                 except FmuError:
                     clean = False
                 self.instances.give(s.fmu, clean) if self.instances else s.fmu.free()

@@ -303,7 +303,8 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
         ssp = ssp or default_ssp()
         started = time.perf_counter()
         _lock_out(out, held)
-        written = run_study(names, out, ssp, factory, progress, args.stop, args.resume, tables)
+        written = run_study(names, out, ssp, factory, progress, args.stop, args.resume, tables,
+                            plots=not args.no_plots)  # fmt: skip
         print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
         for path in written:
             print(f"  {path}")

@@ -21,6 +21,7 @@ from typing import Any
 from impedance_cosim.apps.sweep.metrics import METRICS
 from impedance_cosim.apps.sweep.plan import Plan, archive_payload, master_arguments
 from impedance_cosim.apps.sweep.worker import RunInterruptedError, run_batch, run_point
+from impedance_cosim.cosim.fmu_pool import InstancePool
 from impedance_cosim.util.progress import Progress
 
 TARGET_S = 0.3  # aimed wall time of one task
@@ -61,17 +62,24 @@ def run_serial(
     progress: ProgressHook | None = None,
     indices: Iterable[int] | None = None,
     record: Record | None = None,
+    fresh: bool = False,
 ) -> list[dict]:
-    """The plan's runs (or those at `indices`) one after another in this process (the reference
-    for the dask runs); `record(index, row)` as each finishes."""
+    """The plan's runs (or those at `indices`) one after another in this process, on FMU
+    instances reused from run to run as a dask worker does (fresh=True: new instances per run,
+    the reference they are checked against); `record(index, row)` as each finishes."""
     data, digest = archive_payload(plan.ssp)
+    pool = None if fresh else InstancePool()  # freed at the end: nothing stays loaded
     rows = []
-    for i in range(len(plan.points)) if indices is None else indices:
-        rows.append(run_point(data, digest, plan.points[i], plan.options))
-        if record:
-            record(i, rows[-1])
-        if progress:
-            progress(len(rows), rows[-1])
+    try:
+        for i in range(len(plan.points)) if indices is None else indices:
+            rows.append(run_point(data, digest, plan.points[i], plan.options, instances=pool))
+            if record:
+                record(i, rows[-1])
+            if progress:
+                progress(len(rows), rows[-1])
+    finally:
+        if pool is not None:
+            pool.clear()
     return rows
 
 

@@ -87,10 +87,12 @@ def run_study(
     stop: float | None = None,
     resume: bool = False,
     tables: list | None = None,
+    plots: bool = True,
 ) -> list[Path]:
-    """Run the study's maps (all runs on one cluster), write map_<name>.csv and .png files;
-    with resume, the runs already in the tables are not run again; the tables opened are
-    appended to `tables` (to say how far an interrupted study got)."""
+    """Run the study's maps (all runs on one cluster), write map_<name>.csv and, with plots,
+    its .png files (--no-plots: none, so no serial tail of drawing); with resume, the runs
+    already in the tables are not run again; the tables opened are appended to `tables` (to say
+    how far an interrupted study got)."""
     from impedance_cosim.cosim.ssp import read_ssp
 
     system = read_ssp(ssp or DEFAULT_SSP)
@@ -118,7 +120,7 @@ def run_study(
     written = []
     for name, rows in results.items():
         written.append(out / f"map_{name}.csv")
-        for k, metric in enumerate(STUDY[name].plots):
+        for k, metric in enumerate(STUDY[name].plots if plots else ()):
             png = out / (f"map_{name}.png" if k == 0 else f"map_{name}_{metric}.png")
             title = STUDY[name].title if k == 0 else f"{STUDY[name].title.split(':')[0]}: {metric}"
             plot_map(rows, list(plans[name].axes), metric, png, title)

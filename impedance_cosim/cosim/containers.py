@@ -39,20 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.cosim.engines import EngineError
+from impedance_cosim.cosim.engines import EngineError, typed_value
 
 FMUCONTAINER = "from fmu_manipulation_toolbox.cli.fmucontainer import fmucontainer; fmucontainer()"
-
-
-def _value(value: str, kind: str) -> Any:
-    """An SSV value as the JSON start value of its type."""
-    if kind == "Real":
-        return float(value)
-    if kind == "Integer":
-        return int(value)
-    if kind == "Boolean":
-        return value.strip().lower() in ("true", "1")
-    return value
 
 
 def container_description(
@@ -81,7 +70,7 @@ def container_description(
     starts = []
     for p in system.parameter_sets.get(parameter_set, []) if parameter_set else []:
         component, variable = p.name.split(".", 1)
-        starts.append([files[component], variable, _value(p.value, p.type)])
+        starts.append([files[component], variable, typed_value(p.value, p.type)])
     return {
         "name": name,
         "sequential": sequential,

@@ -69,7 +69,9 @@ def _whole_ns(seconds: float, what: str) -> int:
     return ns
 
 
-def _typed(value: str, kind: str) -> Any:
+def typed_value(value: str, kind: str) -> Any:
+    """An SSV parameter value (text) as the Python value of its SSP type (Real, Integer, Boolean,
+    String): what an engine's setter or a container's start value takes."""
     if kind == "Real":
         return float(value)
     if kind == "Integer":
@@ -157,7 +159,7 @@ def run_in_libcosim(
         v = variables.get(component, {}).get(name)
         if v is None:
             raise EngineError(f"parameter {p.name}: no such variable in libcosim's system")
-        if not setters[v.type](slaves[component], v.reference, _typed(p.value, p.type)):
+        if not setters[v.type](slaves[component], v.reference, typed_value(p.value, p.type)):
             reason = get_last_error_message()
             raise EngineError(f"parameter {p.name}: libcosim refused it: {reason}")
 

@@ -9,7 +9,6 @@ import shutil
 import socket
 import subprocess
 import sys
-import threading
 import time
 import zipfile
 from pathlib import Path
@@ -22,7 +21,7 @@ from impedance_cosim.apps.hil import replacement_problems
 from impedance_cosim.apps.robot import Fault
 from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
-from impedance_cosim.cosim import results
+from impedance_cosim.cosim import realtime, results
 from impedance_cosim.cosim.master import RT_COLUMNS, Master
 from impedance_cosim.cosim.ssp import read_ssp
 
@@ -252,14 +251,24 @@ def test_a_failing_link_stops_the_run_cleanly(system, bridge, robot, fault, mess
     assert np.isfinite(result.data).all()
 
 
-def test_a_robot_killed_mid_run_stops_the_run(system, bridge, robot):
+def test_a_robot_killed_mid_run_stops_the_run(system, bridge, robot, monkeypatch):
+    """The robot is killed once the master has taken 200 paced steps (an event of the run, not a
+    wall-clock moment: a timer missed the run's start on a loaded machine); the next step fails."""
     port = robot()
-    killer = threading.Timer(0.5, robot.proc.kill)
-    killer.start()
-    try:
-        result = bridged(system, bridge, port, 3.0, realtime=True)
-    finally:
-        killer.cancel()
+    paced_steps = realtime.paced_steps
+
+    def killing_after_200(step, n, *rest):
+        def counted(i):
+            done = step(i)
+            if i == 199:
+                robot.proc.kill()
+                robot.proc.wait()
+            return done
+
+        return paced_steps(counted, n, *rest)
+
+    monkeypatch.setattr(realtime, "paced_steps", killing_after_200)
+    result = bridged(system, bridge, port, 3.0, realtime=True)
     assert not result.ok
     assert "not reachable" in result.error or "timeout" in result.error, result.error
     assert 20 < len(result.data) < 1000  # about 200 steps in 0.5 s

@@ -127,7 +127,7 @@ class MujocoPlantModel(PlantModel):
         if not (TIMESTEP.min <= self.timestep <= TIMESTEP.max):
             raise ModelError(f"parameter timestep must be from {TIMESTEP.min:g} to"
                              f" {TIMESTEP.max:g} s (got {self.timestep!r})")  # fmt: skip
-        mjcf = carried_mjcf()
+        mjcf = self.mjcf_text()
         try:
             self.mj, self.mj_data = mujoco_arm(mujoco, mjcf, describe(self.arm.params, self.wall))
         except (ValueError, RuntimeError) as exc:
@@ -140,6 +140,11 @@ class MujocoPlantModel(PlantModel):
         d.qpos[:] = self.q
         d.qvel[:] = 0.0
         mujoco.mj_forward(m, d)
+
+    def mjcf_text(self) -> str:
+        """The MJCF this plant loads: the one its FMU carries (the robot process writes its own:
+        apps/robot_plant.py)."""
+        return carried_mjcf()
 
     # --- stepping -------------------------------------------------------------------------------
 

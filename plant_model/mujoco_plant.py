@@ -51,19 +51,24 @@ def carried_mjcf() -> str:
     return CARRIED[MJCF_FILE]
 
 
-def contact_solref(wall: WallParams, approx_inverse_mass: float) -> tuple[float, float]:
+def contact_solref(
+    wall: WallParams, approx_inverse_mass: float, impedance: float
+) -> tuple[float, float]:
     """MuJoCo's solref (direct form, both negative) that makes the contact force k pen + d rate.
 
-    MuJoCo's contact force on one frictionless row is f = (a_ref - a0) / (A + R): a0 the
-    acceleration of the contact distance without it, A = J M^-1 J^T, R = (1 - i) / i * Ā the
-    regularization, from the impedance i (solimp dmin = dmax = i, constant) and MuJoCo's
-    approximation Ā of A (body_invweight0 of the hand, the wall being static: configuration-
-    independent, computed at qpos0). The direct solref (-s, -b) gives K = s / i^2, B = b / i and
-    a_ref = K i pen + B rate = (s pen + b rate) / i. With s = k Ā and b = d Ā:
-        f = (k pen + d rate) / (1 + i (A/Ā - 1)) - i a0 / (i A + (1 - i) Ā),
-    our law up to a relative i (A/Ā - 1) and a force i a0/Ā, both of order i = 1e-4, MuJoCo's
-    smallest impedance (measured: 9.998 N for 10 N at 1 mm, tests/test_mujoco_plant.py)."""
-    return (-wall.wall_k * approx_inverse_mass, -wall.wall_d * approx_inverse_mass)
+    MuJoCo's force on one frictionless contact row is f = (a_ref - a0) / (A + R): a0 the
+    acceleration of the contact distance without the contact, A = J M^-1 J^T, R = (1 - i) / i * Ā
+    the regularization, from the impedance i (solimp dmin = dmax = i: constant) and MuJoCo's
+    approximation Ā of A (body_invweight0 of the hand; the wall is static; computed once at
+    qpos0). The direct solref (-s, -b) gives K = s / i^2, B = b / i, so the reference
+    acceleration is a_ref = K i pen + B rate = (s pen + b rate) / i. With a1 = a0 + A f the
+    normal acceleration the contact leaves (positive: separating), f (A + R) = a_ref - a1 + A f
+    gives f (1 - i) Ā = s pen + b rate - i a1, so s = (1 - i) k Ā and b = (1 - i) d Ā make
+        f = k pen + d rate - i a1 / ((1 - i) Ā):
+    our law exactly but for the last term, i = 1e-4 (MuJoCo's smallest impedance) times the
+    acceleration times a mass 1/Ā (15 kg here); zero in a static contact."""
+    scale = (1.0 - impedance) * approx_inverse_mass
+    return (-wall.wall_k * scale, -wall.wall_d * scale)
 
 
 def mujoco_arm(mujoco: Any, mjcf: str, desc: RobotDescription) -> tuple[Any, Any]:
@@ -89,9 +94,11 @@ def mujoco_arm(mujoco: Any, mjcf: str, desc: RobotDescription) -> tuple[Any, Any
     data = mujoco.MjData(model)
     mujoco.mj_setConst(model, data)  # body_invweight0 (and the rest) for these numbers
     wall = WallParams(desc.wall_x, desc.wall_k, desc.wall_d)
-    model.pair_solref[0] = contact_solref(
-        wall, float(model.body_invweight0[model.body("hand").id, 0])
-    )
+    dmin, dmax = (float(v) for v in model.pair_solimp[0][:2])
+    if dmin != dmax:
+        raise ValueError(f"the contact pair's impedance must be constant (solimp {dmin}, {dmax})")
+    hand = float(model.body_invweight0[model.body("hand").id, 0])
+    model.pair_solref[0] = contact_solref(wall, hand, dmax)
     if desc.wall_k == 0.0 and desc.wall_d == 0.0:  # no wall force at all: no contact
         model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     return model, data

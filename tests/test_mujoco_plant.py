@@ -124,6 +124,13 @@ def test_contact_force_and_wrist_sensor_are_the_wall_law(bundled, pose, wall_d):
     law = 1e4 * (pose[0] - 0.65) + wall_d * 0.05
     assert out["penetration"] == pytest.approx(pose[0] - 0.65, abs=1e-12)
     assert out["contact_force"] == pytest.approx(law, rel=1e-3)
+    # exactly contact_solref's formula: the law less i a1 / ((1 - i) A), a1 MuJoCo's normal
+    # acceleration of the contact (J qacc), i the impedance, A the hand's body_invweight0
+    a1 = float(d.efc_J.reshape(d.nefc, m.nv)[0] @ d.qacc)
+    i, inverse_mass = m.pair_solimp[0][0], m.body_invweight0[m.body("hand").id, 0]
+    assert abs(a1) > 0.1  # the term is there
+    predicted = law - i * a1 / ((1 - i) * inverse_mass)
+    assert out["contact_force"] == pytest.approx(predicted, rel=1e-9, abs=1e-12)
     assert out["fx"] == pytest.approx(out["contact_force"], rel=1e-9)
     assert abs(out["fy"]) < 1e-9 and abs(out["n"]) < 1e-9
 

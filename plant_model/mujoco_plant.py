@@ -38,6 +38,7 @@ try:  # imported with this module (a later import could not find a build's delet
 except ImportError:  # the checkout: only the build writes it
     CARRIED: dict[str, str] = {}
 NEEDS = "the Python package mujoco (MuJoCo 4.0: pip install mujoco==4.0.0) in the Python running it"
+MAX_SUBSTEPS = 1_000_000  # MuJoCo steps in one communication step (a bound on a request's work)
 NOT_HERE = ("euler_substeps", "rtol", "atol", "max_rhs_evaluations")  # PumaPlant's integrator's
 TIMESTEP = Variable("timestep", "parameter", 2.5e-4, "Longest MuJoCo (RK4) step: each"
                     " communication step is divided into ceil(h / timestep) equal steps", "s",
@@ -163,6 +164,9 @@ class MujocoPlantModel(PlantModel):
             raise ModelError(f"doStep at t={t}, but the plant is at t={self.t}")
         mujoco, m, d = self._mujoco, self.mj, self.mj_data
         n = max(1, math.ceil(h / self.timestep * (1.0 - 1e-12)))
+        if n > MAX_SUBSTEPS:
+            raise ModelError(f"a {h:g} s step needs {n} MuJoCo steps of at most {self.timestep:g}"
+                             f" s, more than {MAX_SUBSTEPS}: take a smaller step")  # fmt: skip
         saved = self._mj_state()
         warnings = [int(w.number) for w in d.warning]
         m.opt.timestep = h / n
@@ -172,7 +176,7 @@ class MujocoPlantModel(PlantModel):
         problem = self._step_problem(warnings)
         if problem:
             self._set_mj_state(saved)
-            raise ModelError(f"MuJoCo step failed: {problem}")
+            raise ModelError(f"MuJoCo step from t={t:g} failed: {problem}")
         q = (float(d.qpos[0]), float(d.qpos[1]), float(d.qpos[2]))
         try:
             q_meas = self._measure(q)
@@ -190,7 +194,7 @@ class MujocoPlantModel(PlantModel):
         for kind, (w, n) in enumerate(zip(d.warning, before)):
             if int(w.number) > n:
                 name = self._mujoco.mjtWarning(kind).name
-                return f"{name} (at t={d.time:g}, value {int(w.lastinfo)}): take a smaller timestep"
+                return f"{name} (value {int(w.lastinfo)}): take a smaller timestep or torque"
         if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             return "the state is not finite"
         return ""

@@ -135,6 +135,20 @@ def test_contact_force_and_wrist_sensor_are_the_wall_law(bundled, pose, wall_d):
     assert abs(out["fy"]) < 1e-9 and abs(out["n"]) < 1e-9
 
 
+def test_a_step_mujoco_cannot_take_is_refused_and_undone(bundled):
+    """A torque MuJoCo's integrator cannot follow (it would reset the state silently) is a
+    ModelError naming MuJoCo's warning; the plant stays where it was; a step needing more than
+    MAX_SUBSTEPS MuJoCo steps is refused before any work."""
+    model = MujocoPlantModel({})
+    model.do_step(0.0, 0.0025, (1.0, 1.0, 1.0))
+    before, state = model.outputs(), model.get_state()
+    with pytest.raises(ModelError, match=r"MuJoCo step from t=0.0025 failed: mjWARN_BADQACC"):
+        model.do_step(0.0025, 0.0025, (1e10, 1e10, 1e10))
+    assert model.outputs() == before and model.get_state() == state
+    with pytest.raises(ModelError, match="needs 4000000000 MuJoCo steps"):
+        model.do_step(0.0025, 1e6, (0.0, 0.0, 0.0))
+
+
 def test_outside_an_fmu_the_missing_mjcf_is_named():
     """Only the build writes carried_files.py: the model run from the checkout says so."""
     with pytest.raises(ModelError, match=r"puma3_mujoco.xml is missing \(the FMU carries it"):

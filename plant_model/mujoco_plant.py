@@ -171,9 +171,18 @@ class MujocoPlantModel(PlantModel):
         warnings = [int(w.number) for w in d.warning]
         m.opt.timestep = h / n
         d.qfrc_applied[:] = inputs
-        mujoco.mj_step(m, d, nstep=n)
-        mujoco.mj_forward(m, d)  # sensors, contacts and kinematics at the new state
+        # MuJoCo's own warning handler prints and appends to MUJOCO_LOG.TXT in the host's working
+        # folder: while we step, its messages come here (and into our error), then it is restored
+        previous, messages = mujoco.get_mju_user_warning(), []
+        mujoco.set_mju_user_warning(messages.append)
+        try:
+            mujoco.mj_step(m, d, nstep=n)
+            mujoco.mj_forward(m, d)  # sensors, contacts and kinematics at the new state
+        finally:
+            mujoco.set_mju_user_warning(previous)
         problem = self._step_problem(warnings)
+        if problem and messages:
+            problem += f" ({messages[0].strip()})"
         if problem:
             self._set_mj_state(saved)
             raise ModelError(f"MuJoCo step from t={t:g} failed: {problem}")

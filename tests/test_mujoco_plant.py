@@ -135,16 +135,21 @@ def test_contact_force_and_wrist_sensor_are_the_wall_law(bundled, pose, wall_d):
     assert abs(out["fy"]) < 1e-9 and abs(out["n"]) < 1e-9
 
 
-def test_a_step_mujoco_cannot_take_is_refused_and_undone(bundled):
+def test_a_step_mujoco_cannot_take_is_refused_and_undone(bundled, tmp_path, monkeypatch):
     """A torque MuJoCo's integrator cannot follow (it would reset the state silently) is a
-    ModelError naming MuJoCo's warning; the plant stays where it was; a step needing more than
-    MAX_SUBSTEPS MuJoCo steps is refused before any work."""
+    ModelError naming MuJoCo's warning with its text; the plant stays where it was; MuJoCo's own
+    handler (which writes MUJOCO_LOG.TXT into the working folder) is bypassed and left as it
+    was; a step needing more than MAX_SUBSTEPS MuJoCo steps is refused before any work."""
+    monkeypatch.chdir(tmp_path)
     model = MujocoPlantModel({})
     model.do_step(0.0, 0.0025, (1.0, 1.0, 1.0))
     before, state = model.outputs(), model.get_state()
-    with pytest.raises(ModelError, match=r"MuJoCo step from t=0.0025 failed: mjWARN_BADQACC"):
+    with pytest.raises(
+        ModelError, match=r"MuJoCo step from t=0.0025 failed: mjWARN_BADQACC .*huge value in QACC"
+    ):
         model.do_step(0.0025, 0.0025, (1e10, 1e10, 1e10))
     assert model.outputs() == before and model.get_state() == state
+    assert list(tmp_path.iterdir()) == [] and mujoco.get_mju_user_warning() is None
     with pytest.raises(ModelError, match="needs 4000000000 MuJoCo steps"):
         model.do_step(0.0025, 1e6, (0.0, 0.0, 0.0))
 

@@ -14,12 +14,14 @@ that reads back to the same double (Python's repr). fmpy.util.read_csv reads it.
 from __future__ import annotations
 
 import csv
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 
 from impedance_cosim.util import atomic
 
@@ -127,8 +129,35 @@ class Feed:
 
 
 def format_rows(data: np.ndarray) -> str:
-    """Rows as CSV lines (repr of each value: exact round trip)."""
-    return "".join(",".join(map(repr, row)) + "\n" for row in data.tolist())
+    """Rows as CSV lines, each value exactly Python's repr (the shortest text that reads back to
+    the same double): orjson writes the shortest digits ~15x faster; its two spellings that
+    differ from repr are rewritten (see _repr_spelling). Non-finite values (orjson: null) and
+    anything not a 2-D float64 array take the plain repr path."""
+    data = np.asarray(data)
+    if data.ndim != 2 or data.dtype != np.float64 or not np.isfinite(data).all() or not len(data):
+        return "".join(",".join(map(repr, row)) + "\n" for row in data.tolist())
+    text = orjson.dumps(np.ascontiguousarray(data), option=orjson.OPT_SERIALIZE_NUMPY)
+    return _repr_spelling(text)[2:-2].replace(b"],[", b"\n").decode() + "\n"
+
+
+# Where orjson's shortest text differs from repr: 1e-05 <= |x| < 1e-04 it writes positionally
+# ("0.000012" for "1.2e-05") and a one-digit negative exponent without padding ("1e-7" for
+# "1e-07"). (Positive exponents are the same: both switch to them at 1e16.)
+_FIXED_E5 = re.compile(rb"0\.0000([1-9])(\d*)")
+_SHORT_EXPONENT = re.compile(rb"e-(\d)(?!\d)")
+
+
+def _e5(match: re.Match[bytes]) -> bytes:
+    at = match.start()
+    if at and match.string[at - 1] in b"0123456789.":  # inside a longer number: 10.00001
+        return match.group(0)
+    digits = match.group(2)
+    return match.group(1) + (b"." + digits if digits else b"") + b"e-05"
+
+
+def _repr_spelling(text: bytes) -> bytes:
+    """orjson's numbers spelled as Python's repr spells them."""
+    return _SHORT_EXPONENT.sub(rb"e-0\1", _FIXED_E5.sub(_e5, text))
 
 
 class CsvStream:

@@ -50,3 +50,32 @@ def test_every_scenario_run_is_spelled_as_repr(native_ssp, algorithm: str) -> No
             assert format_rows(result.data) == repr_rows(result.data), scenario
     finally:
         system.close()
+
+
+def test_a_value_equal_to_the_placeholder_still_reads_as_repr() -> None:
+    from impedance_cosim.cosim import results
+
+    data = np.array([[1.5e-05, results._PLACE, 2e-07], [0.25, 1e-05, 3.0]])
+    assert format_rows(data) == repr_rows(data)
+
+
+def test_each_model_description_is_parsed_once_per_run(native_ssp, monkeypatch) -> None:
+    """Nothing computed twice: the master's checks and the FMU instances share one parse."""
+    from impedance_cosim.cosim import fmu_files
+
+    parsed: list[str] = []
+    real = fmu_files.read_model_description
+
+    def counted(path, *args, **kwargs):
+        parsed.append(path)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(fmu_files, "read_model_description", counted)
+    fmu_files._description.cache_clear()
+    system = read_ssp(native_ssp)
+    try:
+        result = Master(system, stop_time=0.1).run()
+    finally:
+        system.close()
+    assert result.ok, result.error
+    assert len(parsed) == len(set(parsed)) == len(system.components), parsed

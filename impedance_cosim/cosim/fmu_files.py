@@ -134,8 +134,8 @@ class Extractions:
             entry = self._entries.get(key)
             if entry is None:
                 check_fmu_archive(fmu)
-                try:
-                    description = read_model_description(str(fmu))
+                try:  # parsed once per file version (shared with the master's checks)
+                    description = _description(str(fmu), st.st_mtime_ns, st.st_size)
                 except Exception as exc:  # fmpy raises bare Exceptions
                     raise FmuError(f"{fmu.name}: invalid modelDescription.xml ({exc})") from None
                 check_fmu(fmu, description)

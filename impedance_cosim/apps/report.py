@@ -116,8 +116,9 @@ def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path) -> list
     """The files this command left in the results folder."""
     files = []
     for r in record.get("runs", []):
-        if r.get("csv"):
-            files.append(f"{r['csv']} ({r.get('rows', '?')} rows, {r.get('scenario')})")
+        kept = r.get("results") or {"file": r.get("csv"), "rows": r.get("rows", "?")}
+        if kept.get("file"):
+            files.append(f"{kept['file']} ({kept.get('rows', '?')} rows, {r.get('scenario')})")
         name = f"{r.get('scenario')}_summary.json"
         if "summary" in r and (out / name).is_file():
             files.append(f"{name} (the summary)")

@@ -164,12 +164,14 @@ def _repr_rows(data: np.ndarray) -> str:
 class CsvStream:
     """A results CSV appended block by block (see module docstring). Use as a context manager;
     `write(names, rows)` is the sink the master calls. keep_partial=False: on a failed write
-    nothing is kept (for a table whose rows are still in memory, e.g. Result.to_csv)."""
+    nothing is kept (for a table whose rows are still in memory, e.g. Result.to_csv). every=k:
+    only every k-th row reaches the file (the first, k + 1-th, ...: --output-interval)."""
 
-    def __init__(self, path: str | Path, keep_partial: bool = True) -> None:
+    def __init__(self, path: str | Path, keep_partial: bool = True, every: int = 1) -> None:
         self.path, self.keep_partial = Path(path), keep_partial
         self.names: list[str] | None = None
-        self.rows = 0
+        self.rows = 0  # rows in the file
+        self.every, self._seen = every, 0  # rows given to write()
         self._last: float | None = None  # the time of the last row written
         try:
             self._tmp: Path | None = atomic.temp_path(self.path)
@@ -192,6 +194,7 @@ class CsvStream:
             text = ",".join(_quote(n) for n in self.names) + "\n"
         elif list(names) != self.names:
             raise ValueError(f"{self.path.name}: columns changed during the run")
+        rows, self._seen = every_kth(rows, self._seen, self.every), self._seen + len(rows)
         if len(rows):
             text += format_rows(np.asarray(rows, dtype=float))
         try:
@@ -243,6 +246,14 @@ class CsvStream:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def every_kth(rows: np.ndarray, seen: int, every: int) -> np.ndarray:
+    """The rows of a block whose index in the whole run (the block starts at row `seen`) is a
+    multiple of every."""
+    if every == 1:
+        return rows
+    return np.asarray(rows)[(-seen) % every :: every]
 
 
 def write_csv(path: str | Path, names: list[str], data: np.ndarray) -> None:

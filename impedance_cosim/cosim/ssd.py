@@ -13,8 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.ssp_archive import Limits, SspError, read_member, resolve_source
-from impedance_cosim.cosim.system import ANNOTATION_TYPE, NS
+from impedance_cosim.cosim.ssp_archive import (
+    ANNOTATION_TYPE,
+    NS,
+    Limits,
+    SspError,
+    read_member,
+    resolve_source,
+)
 
 TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")
 

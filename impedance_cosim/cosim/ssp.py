@@ -35,6 +35,7 @@ from impedance_cosim.cosim.ssd import (
 )
 from impedance_cosim.cosim.ssp_archive import (
     DEFAULT_LIMITS,
+    NS,
     ArchiveError,
     Limits,
     SspError,
@@ -43,7 +44,6 @@ from impedance_cosim.cosim.ssp_archive import (
     extract,
     resolve_source,
 )
-from impedance_cosim.cosim.system import NS
 
 __all__ = ["Component", "Connector", "Limits", "Parameter", "SspError", "SystemDescription"]
 __all__ += ["read_ssp"]

@@ -6,10 +6,12 @@ Measured side by side in one sitting, each command once per round, rounds altern
   `--result-format mat` and `--output-interval 0.01` where this checkout has them;
 - ecospy 0.7.2 running the same archive from a Python script, the same outputs recorded by its
   own CSV writer (its 6 decimals);
-- `impedance-cosim --version`, `impedance-cosim --help` and `python -c pass` (the floor);
+- `impedance-cosim --version`, `impedance-cosim --help`, and the floor: `python -c pass`,
+  `import numpy`, `import fmpy.fmi2` (what our run imports before it does anything);
 - with --before REV: the same `impedance-cosim` commands of that commit (a git worktree in a
   temporary folder, run with this venv's Python), so before and after appear side by side.
-The CSV of each side is checked byte-identical to the other's.
+The CSV of each side is checked byte-identical to the other's. One round before the measured
+ones is not counted (it writes the bytecode caches and the compiled C loop).
 
     python benchmarks/speed_end_to_end.py [--runs 5] [--before main] [--stop 20]
 """
@@ -62,6 +64,14 @@ def output_names(archive: Path) -> tuple[list[str], float]:
         system.close()
 
 
+def environment(**extra: str) -> dict[str, str]:
+    """The children's environment: this one, but writing bytecode caches as a user's Python
+    does (PYTHONDONTWRITEBYTECODE, set in some sandboxes, makes every start compile every
+    module: ~50 ms more per process here)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return {**env, **extra}
+
+
 def timed(cmd: list[str], env: dict[str, str], cwd: Path) -> float:
     """Wall time of one whole process (which must exit 0)."""
     start = time.perf_counter()
@@ -74,11 +84,12 @@ def timed(cmd: list[str], env: dict[str, str], cwd: Path) -> float:
 
 def side(tree: Path, label: str, work: Path, stop: float) -> dict[str, tuple[list[str], dict]]:
     """The commands of one checkout (tree): name -> (command, environment)."""
-    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env = environment(PYTHONPATH=str(tree))
     cli = [sys.executable, "-c", CLI]
     run = [*cli, "run", "--ssp", str(ARCHIVE), "--no-figures", "--no-report", "--no-progress",
            "--stop", f"{stop:g}"]  # fmt: skip
-    help_text = subprocess.run([*cli, "run", "--help"], env=env, capture_output=True, text=True)
+    help_text = subprocess.run([*cli, "run", "--help"], env=env, cwd=work, capture_output=True,
+                               text=True)  # fmt: skip
     commands = {
         f"{label}: --version": ([*cli, "--version"], env),
         f"{label}: --help": ([*cli, "--help"], env),
@@ -103,12 +114,17 @@ def main() -> None:
     if not ARCHIVE.is_file():
         raise SystemExit(f"{ARCHIVE} missing: run `impedance-cosim build` first")
     names, step = output_names(ARCHIVE)
+    load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="speed-e2e-") as tmp:
         work = Path(tmp)
-        floor = {"python -c pass": ([sys.executable, "-c", "pass"], dict(os.environ))}
+        floor = {"python -c pass": ([sys.executable, "-c", "pass"], environment()),
+                 "python -c 'import numpy'": ([sys.executable, "-c", "import numpy"],
+                                              environment()),
+                 "python -c 'import fmpy.fmi2'": ([sys.executable, "-c", "import fmpy.fmi2"],
+                                                  environment())}  # fmt: skip
         ecos = [sys.executable, "-c", ECOSPY, str(ARCHIVE), str(work / "ecospy.csv"), repr(step),
                 repr(args.stop), json.dumps(names)]  # fmt: skip
-        commands = {**floor, "ecospy 0.7.2 (CSV)": (ecos, dict(os.environ))}
+        commands = {**floor, "ecospy 0.7.2 (CSV)": (ecos, environment())}
         commands.update(side(REPO, "after", work, args.stop))
         if args.before:
             before = work / "before"
@@ -117,6 +133,8 @@ def main() -> None:
         try:
             if args.before:
                 commands.update(side(before, "before", work, args.stop))
+            for cmd, env in commands.values():  # a round not counted: caches, bytecode
+                timed(cmd, env, work)
             times: dict[str, list[float]] = {name: [] for name in commands}
             for _ in range(args.runs):
                 for name, (cmd, env) in commands.items():
@@ -125,18 +143,20 @@ def main() -> None:
             if args.before:
                 subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force",
                                 str(before)], check=False, capture_output=True)  # fmt: skip
-        report(times, args, names, work)
+        report(times, args, names, work, (load, os.getloadavg()[0]))
 
 
-def report(times: dict[str, list[float]], args, names: list[str], work: Path) -> None:
+def report(times: dict[str, list[float]], args, names: list[str], work: Path,
+           load: tuple[float, float]) -> None:  # fmt: skip
     """The table: median, range, and the runs' ratio to ecospy's."""
     ecospy = statistics.median(times["ecospy 0.7.2 (CSV)"])
     print(f"{ARCHIVE.name}, {args.stop:g} s, {len(names)} outputs, medians of {args.runs} "
-          f"(alternating rounds), whole processes")  # fmt: skip
+          f"(alternating rounds), whole processes; load average {load[0]:.1f} at the start,"
+          f" {load[1]:.1f} at the end")  # fmt: skip
     print(f"{'command':32} {'median s':>9} {'range s':>15} {'/ ecospy':>9}")
     for name, values in times.items():
         med = statistics.median(values)
-        ratio = f"{med / ecospy:.2f}x" if "run" in name or "ecospy" in name else ""
+        ratio = f"{med / ecospy:.2f}x"
         print(f"{name:32} {med:9.3f} {min(values):7.3f}-{max(values):<7.3f} {ratio:>9}")
     after = work / "after-csv" / "observer.csv"
     if args.before:

@@ -17,7 +17,7 @@
 #include "linalg3.h"
 #include "model_me.h"
 #include "ode.h"
-#include "partials.h"
+#include "model_partials.h"
 #include "pyrandom.h"
 
 #define H0 1e-3            /* s, the integrator's first step guess */

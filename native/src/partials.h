@@ -3,22 +3,14 @@
  * fmi3GetDirectionalDerivative / fmi3GetOutputDerivatives: partials.c checks the call, the model
  * computes). A model offers them when its generated config.h defines MODEL_PARTIALS (with
  * N_KNOWNS, KNOWN_VRS[]: the states, then the inputs; MAX_OUTPUT_DERIVATIVE_ORDER) and its
- * model.c implements the two model_* functions below. */
+ * model.c implements the two model_* functions of model_partials.h. */
 #ifndef PARTIALS_H
 #define PARTIALS_H
 
 #include <stddef.h>
 
 #include "instance.h"
-
-#ifdef MODEL_PARTIALS
-/* jac[r][k] = d (variable r) / d (known KNOWN_VRS[k]) at the current state, inputs and discrete
- * state, for every output and der() variable r (other rows zero). 0, or 1 with msg set. */
-int model_partials(const Data *d, double jac[N_VARS][N_KNOWNS], char *msg);
-/* The order-th time derivative of output vr at the current state and inputs (1 <= order <=
- * MAX_OUTPUT_DERIVATIVE_ORDER). 0, or 1 with msg set. */
-int model_output_derivative(const Data *d, int vr, int order, double *value, char *msg);
-#endif
+#include "model_partials.h" /* what the model computes */
 
 /* The checked call (function: the FMI function's name, for the log): sensitivity[u] =
  * sum_k d unknowns[u] / d knowns[k] * seed[k]. Under Model Exchange the knowns are states and

@@ -7,6 +7,8 @@ zero); the ModelStructure's dependencies and dependenciesKind against the number
 from __future__ import annotations
 
 import shutil
+import xml.etree.ElementTree as ET
+import zipfile
 
 import numpy as np
 import pytest
@@ -152,3 +154,22 @@ def test_bad_requests_are_refused(native_dir, fmi3_dir):
     with pytest.raises(FMICallException):
         ctrl.fmu.getDirectionalDerivative([ctrl.vr["tau1"]], [ctrl.vr["q1"]], [1.0])
     assert any("directional derivatives are not provided" in m for m in ctrl.messages)
+
+
+@pytest.mark.parametrize("fmi3", [False, True], ids=["fmi2", "fmi3"])
+def test_controller_declares_sampled_dependencies_and_no_partials(native_dir, fmi3_dir, fmi3):
+    """The controller's outputs depend on every input, only at its samples ("discrete"); it
+    claims neither directional nor output derivatives."""
+    md = read_model_description(str((fmi3_dir if fmi3 else native_dir) / "ImpedanceController.fmu"))
+    inputs = {v.name for v in md.modelVariables if v.causality == "input"}
+    for u in md.outputs:
+        assert {d.name for d in u.dependencies} == inputs
+        assert set(u.dependenciesKind) == {"discrete"}
+    flag = "providesDirectionalDerivatives" if fmi3 else "providesDirectionalDerivative"
+    for name, provides in (("ImpedanceController.fmu", None), ("PumaPlant.fmu", "true")):
+        with zipfile.ZipFile((fmi3_dir if fmi3 else native_dir) / name) as z:
+            root = ET.fromstring(z.read("modelDescription.xml"))
+        for kind in ("CoSimulation", "ModelExchange"):
+            assert root.find(kind).get(flag) == provides, (name, kind)
+        order = root.find("CoSimulation").get("maxOutputDerivativeOrder")
+        assert order == ("1" if provides else None), name

@@ -10,7 +10,9 @@ decompositions, wall time (best of --repeat) and the end state's difference to a
 
 fmpy's own CVode (fmpy.sundials.CVodeSolver, 0.3.32) cannot use the Jacobian: it creates a dense
 linear solver (SUNLinSol_Dense) and never calls CVodeSetJacFn (its ctypes bindings have that
-function only as a comment), so CVODE always forms its difference-quotient Jacobian.
+function only as a comment), so CVODE always forms its difference-quotient Jacobian. The last two
+rows run fmpy's CVodeSolver on the same problem as it is, and with CVodeSetJacFn bound here (from
+fmpy's bundled SUNDIALS 7 library) to hand CVODE the FMU's Jacobian.
 
     python benchmarks/jacobian.py                    # wall_k 1e7, wall_d 2e4, 0.5 s, best of 5
     python benchmarks/jacobian.py --wall-d 0 --stop 1   # undamped: the tool bounces off
@@ -114,6 +116,69 @@ def run(fmu: Path, method: str, exact: bool, stop: float, params: dict, tol: tup
     return {"sol": sol, "wall": wall, "nfev": plant.nfev, "njev": plant.njev, "kept": kept}
 
 
+def run_cvode(fmu: Path, exact: bool, stop: float, params: dict, rtol: float) -> dict:
+    """The same problem under fmpy's CVodeSolver (CVODE BDF, dense linear solver, abstol = rtol
+    for these unit nominals); exact: our own CVodeSetJacFn binding hands CVODE the FMU's
+    Jacobian, which fmpy never does."""
+    from ctypes import CFUNCTYPE, POINTER, byref, c_double, c_int, c_long, c_void_p
+
+    from fmpy.sundials import CVodeSolver
+    from fmpy.sundials.libraries import sundials_cvode, sundials_sunmatrixdense
+    from fmpy.sundials.nvector_serial import NV_DATA_S
+    from fmpy.sundials.sundials_matrix import SUNMatrix
+    from fmpy.sundials.sundials_nvector import N_Vector
+
+    plant = Plant(fmu, **params)
+    f, comp = plant.f, plant.f.component
+
+    def get_dx(px, n):
+        plant.nfev += 1
+        f.fmi2GetDerivatives(comp, px, n)
+
+    class Held:  # the torques are set once, before initialization
+        def apply(self, t):
+            pass
+
+    solver = CVodeSolver(
+        nx=6, nz=0, get_x=lambda px, n: f.fmi2GetContinuousStates(comp, px, n),
+        set_x=lambda px, n: f.fmi2SetContinuousStates(comp, px, n), get_dx=get_dx,
+        get_z=lambda pz, n: None,
+        get_nominals=lambda p, n: f.fmi2GetNominalsOfContinuousStates(comp, p, n),
+        set_time=lambda t: f.fmi2SetTime(comp, t), input=Held(), startTime=0.0, maxStep=stop,
+        relativeTolerance=rtol, maxNumSteps=1_000_000,
+    )  # fmt: skip
+    data = sundials_sunmatrixdense.SUNDenseMatrix_Data
+    data.argtypes, data.restype = [SUNMatrix], POINTER(c_double)
+    jac_type = CFUNCTYPE(c_int, c_double, N_Vector, N_Vector, SUNMatrix, c_void_p, N_Vector,
+                         N_Vector, N_Vector)  # fmt: skip
+
+    def jac(t, y, _fy, matrix, _user, _t1, _t2, _t3):
+        m = plant.jac(t, np.ctypeslib.as_array(NV_DATA_S(y), (6,)))
+        np.ctypeslib.as_array(data(matrix), (36,))[:] = m.T.ravel()  # column-major
+        return 0
+
+    if exact:
+        solver.jac_ = jac_type(jac)  # kept alive with the solver
+        set_jac = sundials_cvode.CVodeSetJacFn
+        set_jac.argtypes, set_jac.restype = [c_void_p, jac_type], c_int
+        if set_jac(solver.cvode_mem, solver.jac_) != 0:
+            raise SystemExit("jacobian.py: CVodeSetJacFn failed")
+    start = time.perf_counter()
+    solver.step(0.0, stop)
+    wall = time.perf_counter() - start
+    stats = {}
+    for name in ("CVodeGetNumSteps", "CVodeGetNumJacEvals", "CVodeGetNumLinSolvSetups"):
+        fn, value = getattr(sundials_cvode, name), c_long()
+        fn.argtypes, fn.restype = [c_void_p, POINTER(c_long)], c_int
+        fn(solver.cvode_mem, byref(value))
+        stats[name] = value.value
+    x = (c_double * 6)()
+    f.fmi2GetContinuousStates(comp, x, 6)
+    return {"x": np.array(x), "wall": wall, "nfev": plant.nfev,
+            "steps": stats["CVodeGetNumSteps"], "njev": stats["CVodeGetNumJacEvals"],
+            "setups": stats["CVodeGetNumLinSolvSetups"]}  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--fmu", type=Path, default=REPO / "fmus" / "native" / "PumaPlant.fmu")
@@ -148,6 +213,15 @@ def main() -> None:
                 f"{method:8} {label:22} {len(sol.t) - 1:6d} {r['nfev']:10d} {sol.njev:10d}"
                 f" {sol.nlu:5d} {min(x['wall'] for x in runs):8.3f} {err:10.2e}  {r['kept']}"
             )
+    for exact in (True, False):  # LU column: CVODE's linear-solver setups
+        runs = [run_cvode(args.fmu, exact, args.stop, params, 1e-6) for _ in range(args.repeat)]
+        r = runs[0]
+        label = "exact (our binding)" if exact else "difference quotients"
+        err = float(np.abs(r["x"] - ref).max())
+        print(
+            f"{'CVODE':8} {label:22} {r['steps']:6d} {r['nfev']:10d} {r['njev']:10d}"
+            f" {r['setups']:5d} {min(x['wall'] for x in runs):8.3f} {err:10.2e}"
+        )
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ zero); the ModelStructure's dependencies and dependenciesKind against the number
 
 from __future__ import annotations
 
+import ctypes
 import shutil
 import xml.etree.ElementTree as ET
 import zipfile
@@ -150,6 +151,15 @@ def test_bad_requests_are_refused(native_dir, fmi3_dir):
             cs.fmu.getDirectionalDerivative(unknowns, knowns, [1.0])
     assert any("is not an output or a state derivative" in m for m in cs.messages)
     assert any("known 0 (a1) is not an input" in m for m in cs.messages)
+    f = cs.fmu  # raw calls: NULL arrays with counts, and more knowns than variables
+    with pytest.raises(FMICallException):
+        f.fmi2GetDirectionalDerivative(f.component, None, 1, None, 1, None, None)
+    assert any("NULL array with a non-zero count" in m for m in cs.messages)
+    refs = (ctypes.c_uint * 1)(cs.vr["x"])
+    seed, out = (ctypes.c_double * 1)(1.0), (ctypes.c_double * 1)()
+    with pytest.raises(FMICallException):
+        f.fmi2GetDirectionalDerivative(f.component, refs, 1, refs, 10**9, seed, out)
+    assert any("more than the" in m for m in cs.messages)
     ctrl = CsHost(native_dir / "ImpedanceController.fmu", False)
     with pytest.raises(FMICallException):
         ctrl.fmu.getDirectionalDerivative([ctrl.vr["tau1"]], [ctrl.vr["q1"]], [1.0])

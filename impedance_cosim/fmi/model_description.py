@@ -13,6 +13,7 @@ from impedance_cosim.fmi.variables import (
     METADATA,
     SAMPLED_INPUTS,
     ModelExchange,
+    Partials,
     Variable,
     derivative_variables,
 )
@@ -173,7 +174,9 @@ def model_description(
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def exact_dependencies(partials, name: str, ref: dict[str, int]) -> dict[str, str] | None:
+def exact_dependencies(
+    partials: Partials | None, name: str, ref: dict[str, int]
+) -> dict[str, str] | None:
     """dependencies and dependenciesKind of an unknown from a model's Partials (ref: variable
     name -> index (FMI 2.0) or value reference (FMI 3.0)); None when it declares none."""
     pairs = partials.of(name) if partials else None

@@ -30,7 +30,23 @@ def _open(path, cls, **kw):
     return md, vr, fmu
 
 
-class MeHost:
+class _Host:
+    """What both hosts share: torques in, values out, by name."""
+
+    fmi3: bool
+    vr: dict[str, int]
+    fmu: object
+
+    def set_inputs(self, tau) -> None:
+        refs = [self.vr[n] for n in INPUTS]
+        (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(refs, list(tau))
+
+    def get(self, names) -> np.ndarray:
+        refs = [self.vr[n] for n in names]
+        return np.array((self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)(refs))
+
+
+class MeHost(_Host):
     """A Model Exchange plant, FMI 2.0 or 3.0 (after initialization, in continuous-time mode)."""
 
     def __init__(self, path, fmi3: bool, **params: float) -> None:
@@ -66,14 +82,6 @@ class MeHost:
         name = "getContinuousStateDerivatives" if self.fmi3 else "getDerivatives"
         return self._array(name)
 
-    def set_inputs(self, tau) -> None:
-        refs = [self.vr[n] for n in INPUTS]
-        (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(refs, list(tau))
-
-    def get(self, names) -> np.ndarray:
-        refs = [self.vr[n] for n in names]
-        return np.array((self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)(refs))
-
     def unknowns(self) -> np.ndarray:
         """The outputs, then the state derivatives (the order of unknown_names())."""
         return np.concatenate([self.get(self.outputs), self.derivatives()])
@@ -102,7 +110,7 @@ class MeHost:
         return self.fmu.getDirectionalDerivative(u, k, seed)
 
 
-class CsHost:
+class CsHost(_Host):
     """A co-simulation plant, FMI 2.0 or 3.0, initialized with params, in step mode."""
 
     def __init__(self, path, fmi3: bool, **params: float) -> None:
@@ -131,14 +139,6 @@ class CsHost:
 
     def _log3(self, _env, _status, _category, message) -> None:
         self.messages.append(message.decode())
-
-    def set_inputs(self, tau) -> None:
-        refs = [self.vr[n] for n in INPUTS]
-        (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(refs, list(tau))
-
-    def get(self, names) -> np.ndarray:
-        refs = [self.vr[n] for n in names]
-        return np.array((self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)(refs))
 
     def step(self, h: float) -> None:
         self.fmu.doStep(self.t, h)

@@ -128,13 +128,18 @@ def derive_partials() -> dict[str, tuple[list[str], sp.Matrix]]:
 
 def c_partials(functions) -> tuple[str, str]:
     """arm_partials.h and .c: the derivatives of derive_partials() as C functions."""
+    return c_files("arm_partials", ['#include "arm_terms.h"', ""], functions, PARTIAL_DOCS)
+
+
+def c_files(stem: str, prelude: list[str], functions, docs: dict[str, str]) -> tuple[str, str]:
+    """<stem>.h (guarded, prelude first) and <stem>.c: the functions as C (c_function)."""
     from sympy.printing.c import ccode
 
-    header = [f"/* {HEADER} */", "#ifndef ARM_PARTIALS_H", "#define ARM_PARTIALS_H", "",
-              '#include "arm_terms.h"', ""]  # fmt: skip
-    body = [f"/* {HEADER} */", "#include <math.h>", '#include "arm_partials.h"', ""]
+    guard = f"{stem.upper()}_H"
+    header = [f"/* {HEADER} */", f"#ifndef {guard}", f"#define {guard}", "", *prelude]
+    body = [f"/* {HEADER} */", "#include <math.h>", f'#include "{stem}.h"', ""]
     for name, (args, expr) in functions.items():
-        decl, lines = c_function(ccode, name, args, expr, PARTIAL_DOCS[name])
+        decl, lines = c_function(ccode, name, args, expr, docs[name])
         header += decl
         body += lines
     header += ["", "#endif"]
@@ -172,19 +177,9 @@ def _py(pycode, e) -> str:
 
 
 def c_sources(functions) -> tuple[str, str]:
-    from sympy.printing.c import ccode
-
-    header = [f"/* {HEADER} */", "#ifndef ARM_TERMS_H", "#define ARM_TERMS_H", "",
-              "typedef struct {"]  # fmt: skip
-    header += [f"    double {n};" for n in PARAMS]
-    header += ["} ArmParams;", ""]
-    body = [f"/* {HEADER} */", "#include <math.h>", '#include "arm_terms.h"', ""]
-    for name, (args, expr) in functions.items():
-        decl, lines = c_function(ccode, name, args, expr, DOCS[name])
-        header += decl
-        body += lines
-    header += ["", "#endif"]
-    return "\n".join(header) + "\n", "\n".join(body)
+    """arm_terms.h (with ArmParams) and arm_terms.c."""
+    params = ["typedef struct {", *(f"    double {n};" for n in PARAMS), "} ArmParams;", ""]
+    return c_files("arm_terms", params, functions, DOCS)
 
 
 def c_function(ccode, name: str, args: list[str], expr: sp.Matrix, doc: str):

@@ -13,6 +13,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+import xmlschema
 
 from impedance_cosim.cosim import fmu3
 from impedance_cosim.cosim.master import Master
@@ -21,7 +22,6 @@ from impedance_cosim.cosim.ssd2 import SRMD, schema_dir
 from impedance_cosim.cosim.ssp import SspError, read_ssp
 from impedance_cosim.cosim.system import SCENARIOS, ssd_name
 
-xmlschema = pytest.importorskip("xmlschema")
 REPO = Path(__file__).resolve().parents[1]
 SSD = "SystemStructure.ssd"
 
@@ -217,3 +217,26 @@ def test_the_cli_exits_2_with_one_line_on_a_broken_2_0_ssd(editions, tmp_path, c
     assert "Traceback" not in done.stderr and len(lines) == 1, done.stderr
     assert "broken.ssp" in lines[0]
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (b'implementation="CoSimulation"', b'implementation="ModelExchange"',
+         "component plant: implementation ModelExchange: this master runs PumaPlant.fmu as"
+         " CoSimulation"),
+        (b'implementation="ScheduledExecution"', b'implementation="CoSimulation"',
+         "component controller: implementation CoSimulation is not in"
+         " ImpedanceControllerClocked.fmu"),
+    ],
+)  # fmt: skip
+def test_an_implementation_the_master_cannot_honour_is_refused(editions, tmp_path, old, new,
+                                                               message):  # fmt: skip
+    """SSP 2.0's implementation attribute: the FMU must have it and our master must use it."""
+    from impedance_cosim.cosim.run_setup import MasterError
+
+    ssp = editions[1]
+    for name in [SSD, *(ssd_name(s) for s in SCENARIOS if ssd_name(s) != SSD)]:
+        ssp = _broken(ssp, tmp_path / f"{len(name)}-{name}.ssp", old, new, name)
+    with read_ssp(ssp) as system, pytest.raises(MasterError, match=message):
+        Master(system, stop_time=0.1)

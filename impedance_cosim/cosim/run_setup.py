@@ -12,7 +12,7 @@ from typing import Any
 from impedance_cosim.cosim.fmu import fmi_value
 from impedance_cosim.cosim.fmu3 import ssp_type
 from impedance_cosim.cosim.fmu_files import FmuArchiveError, FmuError, check_fmu, model_description
-from impedance_cosim.cosim.ssd2 import REALS
+from impedance_cosim.cosim.ssd2 import REALS, implementation_problem
 from impedance_cosim.cosim.ssp import SystemDescription
 from impedance_cosim.fmi.variables import ENUMERATIONS
 
@@ -110,6 +110,10 @@ def collect_parameters(
     message of a bad one says it ("in overrides", "given with --set")."""
     variables = {name: {v.name: v for v in md.modelVariables} for name, md in descriptions.items()}
     _check_connectors(system, variables, fmu_files)
+    for comp in system.components:  # SSP 2.0's implementation attribute
+        problem = implementation_problem(comp, descriptions[comp.name], fmu_files[comp.name].name)
+        if problem:
+            raise MasterError(problem)
     values: dict[str, dict[str, Any]] = {name: {} for name in fmu_files}
     for p in system.parameter_sets.get(parameter_set, []):
         comp, var = split_name(p.name)

@@ -35,6 +35,7 @@ class Component:
     source: str  # path inside the archive
     connectors: dict[str, Connector]
     fmu: Path | None = None  # the extracted FMU file
+    implementation: str = "any"  # SSP 2.0: the FMU interface to use (CoSimulation, ...)
 
 
 @dataclass

@@ -143,3 +143,22 @@ def check_checksum(component: ET.Element, fmu: Path, what: str) -> None:
                     f"{what}: {fmu.name} does not match the checksum of its MetaData"
                     f" (SHA3-256 {actual[:16]}..., expected {expected[:16]}...)"
                 )
+
+
+def implementation_problem(comp: Any, md: Any, fmu_name: str) -> str | None:
+    """Why a component's implementation attribute (SSP 2.0) cannot be honoured with its FMU
+    (fmpy model description): the FMU lacks it, or our master would run another interface
+    (Co-Simulation if the FMU has it, else Scheduled Execution). None if it can."""
+    want = getattr(comp, "implementation", "any")
+    if want == "any":
+        return None
+    have = {"CoSimulation": md.coSimulation, "ModelExchange": md.modelExchange,
+            "ScheduledExecution": getattr(md, "scheduledExecution", None)}  # fmt: skip
+    if have.get(want) is None:
+        return f"component {comp.name}: implementation {want} is not in {fmu_name}"
+    used = "CoSimulation" if md.coSimulation is not None else "ScheduledExecution"
+    if want != used:
+        return (
+            f"component {comp.name}: implementation {want}: this master runs {fmu_name} as {used}"
+        )
+    return None

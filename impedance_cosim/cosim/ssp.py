@@ -165,7 +165,8 @@ def _system(src: Source, ssd: str, folder: Path) -> SystemDescription:
         source = resolve_source(c.get("source"), names, what)
         _check_fmu(folder / source, f"{where}: {source}", limits)
         ssd2.check_checksum(c, folder / source, what)
-        comp = Component(name, source, connectors(c, what), fmu=folder / source)
+        comp = Component(name, source, connectors(c, what), folder / source,
+                         c.get("implementation", "any"))  # fmt: skip
         components.append(comp)
         seen.add(name)
         sets += bindings(c, name + ".", what, src)

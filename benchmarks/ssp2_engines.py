@@ -128,7 +128,7 @@ def cell(engine: str, archive: Path, stop: float) -> str:
     out = json.loads(lines[-1])
     if not out["runs"]:
         error = out["error"].replace("|", "/")
-        return f"no: {error[:160]}{'...' if len(error) > 160 else ''}"
+        return f"no: {error[:240]}{'...' if len(error) > 240 else ''}"
     return "yes" + ("" if out["diff"] is None else f", max diff {out['diff']:.2g}")
 
 

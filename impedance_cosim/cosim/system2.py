@@ -23,19 +23,18 @@ from dataclasses import dataclass
 from typing import Any
 
 from impedance_cosim.cosim.system import (
-    ANNOTATION_TYPE,
     COMPONENTS,
-    CONNECTIONS,
     META,
     NS,
     SCENARIO_DESCRIPTIONS,
     SCENARIOS,
     SSD_ELEMENT_ORDER,
-    STEP,
-    STOP,
     SYSTEM_NAME,
     _literal,
     _units,
+    bound_parameters,
+    connections_element,
+    experiment_element,
     parameter_variable,
     ssd_name,
     ssv_name,
@@ -140,12 +139,7 @@ def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes
             },
         )
         connectors = ET.SubElement(el, _q("ssd", "Connectors"))
-        params = {
-            k.split(".", 1)[1]
-            for s in SCENARIOS.values()
-            for k in s
-            if k.startswith(comp.name + ".")
-        }
+        params = bound_parameters(comp.name)
         for v in comp.model_class.variables():
             if v.causality == "parameter" and v.name not in params:
                 continue
@@ -178,36 +172,14 @@ def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes
         )
         if checksums:
             _srmd(el, comp.name, spec, checksums[comp.name])
-    connections = ET.SubElement(system, _q("ssd", "Connections"))
-    for se, sc, ee, ec in CONNECTIONS:
-        ET.SubElement(
-            connections,
-            _q("ssd", "Connection"),
-            {"startElement": se, "startConnector": sc, "endElement": ee, "endConnector": ec},
-        )
+    connections = connections_element(system)
     ET.SubElement(
         connections,
         _q("ssd", "Connection"),
         {"startElement": "controller", "startConnector": CLOCK, "endConnector": CLOCK},
     )
     _units(root, "ssd", used_units)
-    exp = ET.SubElement(
-        root, _q("ssd", "DefaultExperiment"), {"startTime": "0.0", "stopTime": repr(STOP)}
-    )
-    ann = ET.SubElement(
-        ET.SubElement(exp, _q("ssd", "Annotations")),
-        _q("ssc", "Annotation"),
-        {"type": ANNOTATION_TYPE},
-    )
-    ET.SubElement(
-        ann,
-        "master",
-        {
-            "stepSize": repr(STEP),
-            "algorithm": "gauss-seidel",
-            "order": " ".join(c.name for c in COMPONENTS),
-        },
-    )
+    experiment_element(root)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 

@@ -40,12 +40,15 @@ from impedance_cosim.cosim.system import (
     ssv_name,
 )
 from impedance_cosim.fmi.variables import Variable
+from impedance_cosim.version import __version__
 
 VERSION = "2.0"
 SRMD_NS = "http://ssp-standard.org/SSPTraceability1/SimulationResourceMetaData"
 SRMD_TYPE = "application/x-srmd-meta-data"
 ET.register_namespace("srmd", SRMD_NS)
 FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+# SSP's top-level meta data as in 1.0, and the tool that wrote the file
+META2 = {**META, "generationTool": f"impedance_cosim {__version__} (cosim/system2.py)"}
 CLOCK = "sample_clock"  # the clocked controller's input clock, and the system's clock connector
 
 
@@ -101,7 +104,7 @@ def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes
             "version": VERSION,
             "name": scenario,
             "description": SCENARIO_DESCRIPTIONS[scenario],
-            **META,
+            **META2,
         },
     )
     system = ET.SubElement(
@@ -215,7 +218,7 @@ def ssv2_xml(scenario: str, component: str) -> bytes:
             "version": VERSION,
             "name": scenario,
             "description": SCENARIO_DESCRIPTIONS[scenario],
-            **META,
+            **META2,
         },
     )
     params = ET.SubElement(root, _q("ssv", "Parameters"))

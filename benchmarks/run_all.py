@@ -4,7 +4,8 @@ sweep speed-ups: serial (single runs in this process, the reference) against a L
 (with and without its start) and against an external `dask scheduler` + `dask worker`s on
 loopback, for 64 native runs, the native stability study (every map of `sweep --study`) and 64
 Python runs, the distribution bundle (its size and build time, benchmarks/dist_bundle.py), and the
-engine table (every engine on every scenario archive, benchmarks/engines_table.py). Every dask
+engine table (every engine on every scenario archive, benchmarks/engines_table.py) and the
+paper scenario with MuJoCo's plant (benchmarks/mujoco_compare.py). Every dask
 table is checked equal to the serial one.
 
     python benchmarks/run_all.py            # ~5 min on 2 idle cores
@@ -191,7 +192,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="5 s runs, 16-run grids, no study")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--no-external", action="store_true", help="skip the external cluster")
-    parser.add_argument("--only", choices=["master", "sweeps", "bundle", "engines"], default=None)
+    parser.add_argument(
+        "--only", choices=["master", "sweeps", "bundle", "engines", "mujoco"], default=None
+    )
     args = parser.parse_args()
     if not (DEFAULT_OUT / "PaperScenario-native.ssp").is_file():
         build_all()
@@ -234,6 +237,12 @@ def main() -> None:
 
         print("\nevery engine on every scenario archive (docs/system.md):")
         engines_table.table()
+    if args.only in (None, "mujoco"):
+        import mujoco_compare  # beside this script
+
+        print("\nthe paper scenario with MuJoCo's plant (docs/mujoco.md):")
+        mujoco_compare.compare(DEFAULT_OUT / "PaperScenario.ssp", DEFAULT_OUT / "MujocoPlant.fmu",
+                               stop)  # fmt: skip
     print(f"\nload average at the end: {' '.join(f'{v:.1f}' for v in os.getloadavg())}")
 
 

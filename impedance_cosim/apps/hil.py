@@ -22,6 +22,7 @@ from typing import Any
 
 from bridge_model import protocol
 from impedance_cosim.apps.robot import MAX_STEP_RANGE, TICK_RANGE, Fault, RobotServer, check_range
+from impedance_cosim.apps.robot_plant import PLANTS
 from impedance_cosim.apps.robot_process import LISTENING, start_robot, stop_robot
 
 # --- swap checks --------------------------------------------------------------------------------
@@ -91,7 +92,7 @@ def _cmd_robot(args: argparse.Namespace) -> int:
     realtime, tick, max_step, duration, faults, key = _robot_options(args)
     server = RobotServer(key, args.host, args.port, realtime, parse_overrides(args.set or []),
                          faults, tick=tick, max_step=max_step,
-                         allow_remote=args.allow_remote)  # fmt: skip
+                         allow_remote=args.allow_remote, plant=args.plant)  # fmt: skip
     try:
         host, port = server.address
         print(f"{LISTENING} {host}:{port} ({server.mode})", flush=True)
@@ -192,6 +193,7 @@ def _cmd_swap(args: argparse.Namespace) -> int:
         if len(bridged) != 1:
             raise options.CliError("--robot needs exactly one replacement that is a bridge FMU")
         extra = [f"--set=plant.{s.split('.', 1)[1]}" for s in args.robot_set or []]
+        extra += ["--plant", args.robot_plant]
         token = protocol.new_token()  # to the robot in its environment, to the bridge in-process
         robot, port = start_robot(token, args.robot == "realtime", extra)
         args.set = [*(args.set or []), f"{bridged[0]}.robot_port={port}",
@@ -239,6 +241,12 @@ def add_parsers(sub) -> None:
                         "robot_port); killed after the run")  # fmt: skip
     p.add_argument("--robot-set", action="append", metavar="plant.VARIABLE=VALUE",
                    help="a parameter the robot process overrides (model mismatch)")  # fmt: skip
+    p.add_argument(
+        "--robot-plant",
+        choices=PLANTS,
+        default="ours",
+        help="the plant the robot process runs (default ours; mujoco: MuJoCo's)",
+    )
     add_run_options(p, out="results/swap")
     p.set_defaults(func=_cmd_swap)
 
@@ -257,6 +265,9 @@ def add_parsers(sub) -> None:
                    help="allow a --host other machines can reach ('' or 0.0.0.0: every "
                         "interface); see docs/hil.md, Trust model")  # fmt: skip
     p.add_argument("--port", default="50400", help="UDP port (default 50400; 0: a free one)")
+    p.add_argument("--plant", choices=PLANTS, default="ours",
+                   help="the plant it runs: ours (default) or mujoco (MuJoCo's, as in"
+                        " fmus/MujocoPlant.fmu; needs the mujoco package)")  # fmt: skip
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="realtime", action="store_false", default=False,
                       help="advance only on request (default; deterministic)")  # fmt: skip

@@ -1,5 +1,6 @@
-"""The robot process: plant_model.model.PlantModel behind the bridge protocol
-(bridge_model/protocol.py), the stand-in for the hardware behind the bridge FMU (docs/hil.md).
+"""The robot process: plant_model.model.PlantModel (or MuJoCo's plant, --plant mujoco:
+robot_plant.py) behind the bridge protocol (bridge_model/protocol.py), the stand-in for the
+hardware behind the bridge FMU (docs/hil.md).
 
 In lock-step mode it steps exactly as the bridge asks (the same calls as the in-process plant:
 bit-identical results); in real-time mode it integrates against the wall clock in fixed ticks
@@ -53,7 +54,9 @@ class RobotServer:
         max_step: float = 1.0,
         log=None,
         allow_remote: bool = False,
+        plant: str = "ours",
     ) -> None:
+        from impedance_cosim.apps.robot_plant import plant_class
         from impedance_cosim.fmi.model import ModelError
         from plant_model.model import PlantModel
 
@@ -62,9 +65,11 @@ class RobotServer:
         self.max_step = check_range("--max-step", max_step, *MAX_STEP_RANGE)
         if not (isinstance(port, int) and 0 <= port <= 65535):
             raise ValueError(f"--port must be 0-65535 (got {port!r})")
-        self.model_class = PlantModel
-        self.parameters = [v for v in PlantModel.variables() if v.causality == "parameter"]
-        names = {v.name: v for v in self.parameters}
+        self.model_class = plant_class(plant)  # ours or MuJoCo's (apps/robot_plant.py)
+        self.parameters = [
+            v for v in PlantModel.variables() if v.causality == "parameter"
+        ]  # INIT's
+        names = {v.name: v for v in self.model_class.variables() if v.causality == "parameter"}
         self.overrides = {}
         for key_, value in (overrides or {}).items():
             comp, _, var = key_.partition(".")
@@ -72,7 +77,7 @@ class RobotServer:
                 raise ValueError(f"the robot has no parameter {key_!r} (write plant.<parameter>)")
             self.overrides[var] = _convert(names[var].type, value, key_)
         try:  # a bad override is found now, not at the first INIT
-            PlantModel({**{v.name: v.start for v in self.parameters}, **self.overrides}, 0.0)
+            self.model_class({**{v.name: v.start for v in names.values()}, **self.overrides}, 0.0)
         except ModelError as exc:
             raise ValueError(f"--set: the plant refuses these parameters: {exc}") from None
         self.realtime = realtime

@@ -58,6 +58,12 @@ def external_dependencies(model_name: str, flavour: str) -> str:
             " 0.3.4 wrappers that run resources/*.py in the Python of the process that loads them"
             " (standard library only). For C hosts use the native FMI 3.0 FMUs."
         )
+    if model_name == "MujocoPlant":
+        lines.append(
+            "The Python packages mujoco 4.0.0 (MuJoCo: pip install mujoco==4.0.0) and numpy in"
+            " that Python: the model is MuJoCo stepping the MJCF in resources/ (instantiation"
+            " fails with one line naming the package when it is missing)."
+        )
     if model_name == "BridgePlant":
         lines.append(
             "A robot process answering the UDP protocol of bridge_model/protocol.py at"
@@ -187,6 +193,7 @@ def _interfaces_section(root: ET.Element, members: list[str]) -> str:
 EXAMPLES = {
     "PumaPlant": "q_noise 1e-4 noise_seed 7",
     "PinocchioPlant": "q_noise 1e-4 noise_seed 7",
+    "MujocoPlant": "q_noise 1e-4 noise_seed 7",
     "ImpedanceController": "K1 80 K2 80 K3 80",
     "BridgePlant": "robot_port 50400",
 }

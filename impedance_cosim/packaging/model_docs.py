@@ -134,6 +134,18 @@ Pinocchio (<code>pip install pin==4.1.0</code>) and numpy in the Python that run
 them instantiation fails, saying so. The wall, sensors and integrator are PumaPlant's.</p>
 """
 
+MUJOCO = """
+<p><b>MujocoPlant</b> has PumaPlant's interface, simulated by MuJoCo from the MJCF it carries
+(puma3_mujoco.xml, in resources/…/carried_files.py): RK4 with ceil(h / <code>timestep</code>)
+equal steps per communication step, the wall as MuJoCo contact whose direct
+<code>solref</code> (−wall_k·Ā, −wall_d·Ā; Ā MuJoCo's approximate inverse mass of the hand)
+makes its force PumaPlant's wall law to about 1e-4, the wrist force/torque from MuJoCo's force
+and torque sensors at site <code>wrist</code>. It needs MuJoCo (<code>pip install
+mujoco==4.0.0</code>) and numpy in the Python that runs it; without them instantiation fails,
+saying so. The arm and wall below are its numbers; PumaPlant's integrator parameters are not
+parameters here.</p>
+"""
+
 BRIDGE = """
 <p>A hardware-in-the-loop bridge with PumaPlant's interface (the same parameters, inputs and
 outputs). It simulates nothing: at initialization it sends the plant parameters to an external
@@ -149,9 +161,10 @@ return fmi2Discard with the cause logged; every wait is bounded (<code>timeout_s
 def model_section(model_name: str, starts: dict[str, dict[str, str]]) -> str:
     """The 'what the model is' part of index.html for a model, with its numbers."""
     arm = ARM.format(arm=_nums(starts, ARM_NAMES))
-    if model_name in ("PumaPlant", "PinocchioPlant"):
+    if model_name in ("PumaPlant", "PinocchioPlant", "MujocoPlant"):
         page = PLANT.format(arm=arm, wall=_nums(starts, ["wall_x", "wall_k", "wall_d"]))
-        return page if model_name == "PumaPlant" else PINOCCHIO + page
+        intro = {"PinocchioPlant": PINOCCHIO, "MujocoPlant": MUJOCO}.get(model_name, "")
+        return intro + page
     if model_name == "ImpedanceController":
         traj = _nums(starts, ["traj_cx", "traj_cy", "traj_ax", "traj_ay", "traj_f", "traj_phi",
                               "wall_x", "wall_depth"])  # fmt: skip

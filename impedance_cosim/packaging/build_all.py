@@ -99,6 +99,9 @@ def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
             from impedance_cosim.packaging.build3 import build_fmi3  # the FMI 3.0 edition
 
             built += build_fmi3(out_dir)
+            from impedance_cosim.packaging.closedloop import build_closed_loops  # one-FMU loops
+
+            built += build_closed_loops(out_dir)
         from impedance_cosim.packaging.robot_files import write_robot_files  # URDF and MJCF
 
         built += write_robot_files(Path(out_dir) / "robot")

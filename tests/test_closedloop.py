@@ -37,10 +37,12 @@ N_OUTPUTS = sum(
 
 
 @pytest.fixture(scope="module")
-def closed_loops(fmu_dir: Path, native_dir: Path) -> Path:
-    """The closed-loop FMUs of every scenario, FMI 2.0 in native/, FMI 3.0 in fmi3/."""
-    build_closed_loops(fmu_dir)
-    return fmu_dir
+def closed_loops(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The closed-loop FMUs of every scenario, FMI 2.0 in native/, FMI 3.0 in fmi3/ (a folder of
+    their own: other tests count the session's FMUs)."""
+    out = tmp_path_factory.mktemp("closedloop")
+    build_closed_loops(out)
+    return out
 
 
 def path_of(folder: Path, fmi: int, scenario: str) -> Path:

@@ -34,9 +34,11 @@ RECORD = ("plant.x", "plant.y", "plant.q1", "plant.q2", "plant.q3", "controller.
 
 
 @pytest.fixture(scope="module")
-def closed_loops(fmu_dir: Path) -> Path:
-    build_closed_loops(fmu_dir)
-    return fmu_dir
+def closed_loops(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The closed-loop FMUs, in a folder of their own (other tests count the session's FMUs)."""
+    out = tmp_path_factory.mktemp("closedloop")
+    build_closed_loops(out)
+    return out
 
 
 def run(platform: str, fmi: int, folder: Path, tmp_path: Path, request) -> np.ndarray:

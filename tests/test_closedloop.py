@@ -166,3 +166,79 @@ def test_fmu_compliance_checker_reports_nothing(closed_loops, scenario, tmp_path
     assert done.returncode == 0, report[-3000:]
     assert re.search(r"FMU reported:\s+0 warning\(s\) and error\(s\)", report), report[-3000:]
     assert re.search(r"Checker reported:\s+0 Warning\(s\)\s+0 Error\(s\)", report), report[-3000:]
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_serialized_state_resumes_the_same_rows(closed_loops, fmi):
+    """Both parts travel in the closed loop's FMU state: rows after restoring a serialized state
+    (taken in contact, at 4 s) equal the uninterrupted run's; a flipped byte is refused."""
+    names = ["plant.x", "plant.contact_force", "controller.tau1", "controller.xd_hat"]
+    inst = open_fmu(path_of(closed_loops, fmi, "observer"), "loop")
+    try:
+        inst.setup(0.0, 5.0)
+        inst.enter_initialization()
+        inst.exit_initialization()
+        read = inst.real_getter(names)
+        for i in range(1600):
+            inst.step(i * H, H)
+        state = inst.get_state()
+        data = inst.serialize_state(state)
+        inst.free_state(state)
+        first = []
+        for i in range(1600, 1800):
+            inst.step(i * H, H)
+            first.append(read())
+        restored = inst.deserialize_state(data)
+        inst.set_state(restored)
+        inst.free_state(restored)
+        again = []
+        for i in range(1600, 1800):
+            inst.step(i * H, H)
+            again.append(read())
+        bad = bytearray(data)
+        bad[len(bad) // 2] ^= 0x10
+        with pytest.raises(FmuError):
+            inst.deserialize_state(bytes(bad))
+    finally:
+        inst.free()
+    assert max(r[1] for r in first) > 1.0  # in contact with the wall
+    assert again == first
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_fmpy_simulate_with_only_the_default_experiment(closed_loops, fmi, tmp_path):
+    """`fmpy simulate FMU`, no options: the default experiment (20 s; fmpy coarsens the step to
+    keep 1000 points, so every host step spans several samples)."""
+    out = tmp_path / "out.csv"
+    fmpy_cli = str(Path(sys.executable).parent / "fmpy")
+    fmu = str(path_of(closed_loops, fmi, "observer"))
+    done = subprocess.run([fmpy_cli, "simulate", fmu, "--output-file", str(out)],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = np.genfromtxt(out, delimiter=",", names=True)
+    assert rows["time"][-1] == pytest.approx(20.0)
+    assert rows["plantcontact_force"].max() > 50.0  # the impact peak (88 N at 400 Hz)
+
+
+def test_model_exchange_is_not_offered(closed_loops):
+    """Co-simulation only: no ModelExchange element, and an ME instantiation is refused."""
+    from fmpy import extract
+    from fmpy.fmi2 import FMU2Model
+
+    fmu = path_of(closed_loops, 2, "observer")
+    md = read_model_description(str(fmu))
+    assert md.modelExchange is None
+    identifier = md.coSimulation.modelIdentifier
+    model = FMU2Model(guid=md.guid, unzipDirectory=extract(str(fmu)),
+                      modelIdentifier=identifier, instanceName="me")  # fmt: skip
+    with pytest.raises(Exception, match="nstantiate"):
+        model.instantiate()
+
+
+def test_a_bad_parameter_is_refused_naming_it(closed_loops):
+    inst = open_fmu(path_of(closed_loops, 2, "observer"), "loop")
+    try:
+        with pytest.raises(FmuError, match=r"plant\.a1 must be >= 0"):
+            inst.set({"plant.a1": -1.0})
+    finally:
+        inst.free()

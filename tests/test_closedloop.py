@@ -24,7 +24,8 @@ from impedance_cosim.cosim.fmu3 import open_fmu
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.ssp import read_ssp
 from impedance_cosim.cosim.system import SCENARIOS
-from impedance_cosim.packaging.closedloop import build_closed_loops, fmu_name
+from impedance_cosim.packaging.build_all import build_all
+from impedance_cosim.packaging.closedloop import fmu_name
 from plant_model.model import PlantModel
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
@@ -41,7 +42,9 @@ def closed_loops(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The closed-loop FMUs of every scenario, FMI 2.0 in native/, FMI 3.0 in fmi3/ (a folder of
     their own: other tests count the session's FMUs)."""
     out = tmp_path_factory.mktemp("closedloop")
-    build_closed_loops(out)
+    built = build_all(out, only=["closedloop"])  # as `impedance-cosim build --only closedloop`
+    expected = [path_of(out, fmi, s) for fmi in (2, 3) for s in SCENARIOS]
+    assert sorted(built) == sorted(expected)
     return out
 
 

@@ -245,3 +245,26 @@ def test_a_bad_parameter_is_refused_naming_it(closed_loops):
             inst.set({"plant.a1": -1.0})
     finally:
         inst.free()
+
+
+def test_a_refused_step_leaves_the_loop_at_its_start(closed_loops, native_ssp):
+    """A host step over more samples than controller.max_samples_per_step is refused (one line
+    naming the parameter) and changes nothing: stepping on gives the master's rows."""
+    reference = master_run(native_ssp, "observer", 1.0)
+    names = reference.names[1:]
+    inst = open_fmu(path_of(closed_loops, 2, "observer"), "loop")
+    try:
+        inst.setup(0.0, 1.0)
+        inst.set({"controller.max_samples_per_step": 10})
+        inst.enter_initialization()
+        inst.exit_initialization()
+        read = inst.real_getter(names)
+        rows = [read()]
+        with pytest.raises(FmuError, match="max_samples_per_step"):
+            inst.step(0.0, 1.0)
+        for i in range(400):
+            inst.step(i * H, H)
+            rows.append(read())
+    finally:
+        inst.free()
+    assert np.abs(np.array(rows) - reference.data[:, 1:]).max() <= FLOOR

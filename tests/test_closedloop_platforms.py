@@ -87,3 +87,23 @@ def test_closed_loop_fmu_agrees_with_x86_64_linux(platform, fmi, closed_loops, t
     worst = float((np.abs(rows - reference) / scale).max())
     print(f"FMI {fmi} {platform}: worst difference to x86_64-linux relative to range: {worst:.3g}")
     assert worst <= TOLERANCE[platform], worst
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("platform", ["linux64", "win64", "aarch64-linux"])
+def test_closed_loop_sources_compile_without_warnings(platform, fmi, closed_loops, tmp_path):
+    """sources/ as buildDescription.xml lists them, with -Werror (on Linux also --no-undefined:
+    the two parts' renamed model functions and the closed loop's link into one library)."""
+    import xml.etree.ElementTree as ET
+
+    toolchain = (
+        need_compiler(platform) if platform != "linux64" else toolchains.BY_PLATFORM[platform]
+    )
+    fmu = closed_loops / ("native" if fmi == 2 else "fmi3") / f"{fmu_name('observer')}.fmu"
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(tmp_path)
+    src = tmp_path / "sources"
+    files = [f.get("name") for f in ET.parse(src / "buildDescription.xml").iter("SourceFile")]
+    strict = ("-Werror",) if platform == "win64" else ("-Werror", "-Wl,--no-undefined")
+    toolchains.compile_library(toolchain, src, files, tmp_path / f"lib{toolchain.suffix}", strict)
+    assert (tmp_path / f"lib{toolchain.suffix}").is_file()

@@ -17,7 +17,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
-from impedance_cosim.fmi.variables import ModelExchange, Variable, parameters_of, vector
+from impedance_cosim.fmi.variables import (
+    ModelExchange,
+    Partials,
+    Variable,
+    parameters_of,
+    vector,
+)
 from impedance_cosim.physics.arm import Arm, ArmParams, UnreachablePoseError, _p, check_fields
 from impedance_cosim.physics.ode import IntegrationError, euler_step, integrate
 from impedance_cosim.physics.wall import WallParams, contact_event, contact_force_law, wall_force
@@ -92,6 +98,28 @@ MAX_EULER_SUBSTEPS = 1_000_000  # per communication step (euler_substeps)
 H0 = 1e-3  # s, the integrator's first step guess
 
 
+def _partials() -> Partials:
+    """What each output and state derivative of the native plant depends on (exactly: the
+    directional derivatives of native/plant/model.c; tests/test_partials.py checks the pattern)
+    and how: "constant" where the partial derivative is a constant (an angle on its own state),
+    "dependent" otherwise. The wrist force fy and moment n are zero: no dependency at all."""
+    q, qd = ("q1_true", "q2_true", "q3_true"), ("qd1", "qd2", "qd3")
+
+    def on(names, kind="dependent"):
+        return tuple((n, kind) for n in names)
+
+    deps = {f"q{i}": on([q[i - 1]], "constant") for i in (1, 2, 3)}
+    deps.update({"fx": on(q + qd), "fy": (), "n": ()})
+    deps.update({q[i]: on([q[i]], "constant") for i in range(3)})
+    deps.update({qd[i]: on([qd[i]], "constant") for i in range(3)})
+    deps.update({"x": on(q), "y": on(q), "phi": on(q, "constant")})
+    deps.update({"xd": on(q + qd), "yd": on(q + qd), "phid": on(qd, "constant")})
+    deps.update({"contact_force": on(q + qd), "penetration": on(q)})
+    deps.update({f"der({q[i]})": on([qd[i]], "constant") for i in range(3)})
+    deps.update({f"der({s})": on(q + qd + INPUTS) for s in qd})
+    return Partials(tuple(deps.items()), max_output_derivative_order=1)
+
+
 class PlantModel(FmuModel):
     """Arm + wall + sensors (see module docstring)."""
 
@@ -107,7 +135,9 @@ class PlantModel(FmuModel):
     # The tolerance a host's solver should use (the plant's own integrator runs at rtol 1e-9).
     DEFAULT_EXPERIMENT = {**FmuModel.DEFAULT_EXPERIMENT, "tolerance": 1e-9}
     MODEL_EXCHANGE = ModelExchange(
-        states=("q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3"), event_indicators=1
+        states=("q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3"),
+        event_indicators=1,
+        partials=_partials(),
     )
 
     @classmethod

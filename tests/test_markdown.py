@@ -129,12 +129,8 @@ def built() -> Path:
     from impedance_cosim.apps.run import stale
 
     fmus = REPO / "fmus"
-    names = [
-        "PaperScenario.ssp",
-        "PaperScenario-native.ssp",
-        "PaperScenario-fmi3.ssp",
-        "native/PaperClosedLoop-observer.fmu",
-    ]
+    names = ["PaperScenario.ssp", "PaperScenario-native.ssp", "PaperScenario-fmi3.ssp",
+             "PaperScenario-fmi3-ssp2.ssp", "native/PaperClosedLoop-observer.fmu"]  # fmt: skip
     if any(stale(fmus / n) for n in [*names, "BridgePlant.fmu"]):
         subprocess.run(
             [sys.executable, "-m", "impedance_cosim", "build"], cwd=REPO, env=environment(),

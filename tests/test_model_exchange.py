@@ -107,9 +107,11 @@ def test_native_plant_declares_model_exchange(native_dir, fmu_dir):
     assert units == {**dict.fromkeys(STATES[:3], "rad/s"), **dict.fromkeys(STATES[3:], "rad/s2")}
     initial = {u.variable.name for u in md.initialUnknowns}
     assert {f"der({s})" for s in STATES} | set(STATES) <= initial
-    # outputs depend on the states only (no direct feedthrough from the torques)
+    # outputs depend on the states only (no direct feedthrough from the torques); which states
+    # exactly is checked against the directional derivatives in tests/test_partials.py
     state_vars = {v for v in md.modelVariables if v.name in STATES}
-    assert all(set(u.dependencies) == state_vars for u in md.outputs)
+    assert all(set(u.dependencies) <= state_vars for u in md.outputs)
+    assert any(set(u.dependencies) == state_vars for u in md.outputs)
     with zipfile.ZipFile(path) as z:
         assert "sources/fmi2_me.c" in z.namelist()
     # the Python FMUs (pythonfmu: co-simulation only) do not claim ME

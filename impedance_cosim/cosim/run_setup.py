@@ -12,6 +12,7 @@ from typing import Any
 from impedance_cosim.cosim.fmu import fmi_value
 from impedance_cosim.cosim.fmu3 import ssp_type
 from impedance_cosim.cosim.fmu_files import FmuArchiveError, FmuError, check_fmu, model_description
+from impedance_cosim.cosim.ssd2 import REALS, implementation_problem
 from impedance_cosim.cosim.ssp import SystemDescription
 from impedance_cosim.fmi.variables import ENUMERATIONS
 
@@ -51,9 +52,9 @@ def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list
             continue
         if v.causality != c.kind:
             problems.append(f"{where}: causality {v.causality} in the FMU, {c.kind} in the SSD")
-        if ssp_type(v.type) != c.type:
+        if v.type != c.type and ssp_type(v.type) != c.type:  # SSP 1.0 Real = FMI 3 Float64
             problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
-        if c.type == "Real" and (v.unit or None) != (c.unit or None):
+        if c.type in REALS and (v.unit or None) != (c.unit or None):
             problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
     return problems
 
@@ -109,6 +110,10 @@ def collect_parameters(
     message of a bad one says it ("in overrides", "given with --set")."""
     variables = {name: {v.name: v for v in md.modelVariables} for name, md in descriptions.items()}
     _check_connectors(system, variables, fmu_files)
+    for comp in system.components:  # SSP 2.0's implementation attribute
+        problem = implementation_problem(comp, descriptions[comp.name], fmu_files[comp.name].name)
+        if problem:
+            raise MasterError(problem)
     values: dict[str, dict[str, Any]] = {name: {} for name in fmu_files}
     for p in system.parameter_sets.get(parameter_set, []):
         comp, var = split_name(p.name)

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from impedance_cosim.cosim import ssd2
+from impedance_cosim.cosim.ssd2 import INTEGERS, REALS, TYPES
 from impedance_cosim.cosim.ssp_archive import Limits, SspError, read_member, resolve_source
 from impedance_cosim.cosim.system import ANNOTATION_TYPE, NS
-
-TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,8 @@ class Connector:
     kind: str
     type: str
     unit: str | None
+    clocks: tuple[str, ...] = ()  # SSP 2.0: the clocks (connector names) it is associated to
+    interval: str | None = None  # SSP 2.0 Clock connectors: the intervalVariability
 
 
 @dataclass
@@ -33,6 +35,7 @@ class Component:
     source: str  # path inside the archive
     connectors: dict[str, Connector]
     fmu: Path | None = None  # the extracted FMU file
+    implementation: str = "any"  # SSP 2.0: the FMU interface to use (CoSimulation, ...)
 
 
 @dataclass
@@ -56,6 +59,10 @@ class SystemDescription:
     algorithm: str | None = None
     order: list[str] = field(default_factory=list)
     variants: dict[str, str] = field(default_factory=dict)  # parameter set -> the SSD binding it
+    version: str = "1.0"  # of SystemStructure.ssd: SSP 1.0 or 2.0
+    system_connectors: dict[str, Connector] = field(default_factory=dict)
+    # SSP 2.0 connections of Clock connectors, (start, connector, end, connector), "" = the system
+    clock_connections: list[tuple[str, str, str, str]] = field(default_factory=list)
     folder: Path | None = None  # where the archive was extracted
     _extracted: Any = field(default=None, repr=False)  # finaliser removing an owned folder
 
@@ -88,7 +95,8 @@ def _schema(name: str) -> Any:
 def parse_xml(
     archive: zipfile.ZipFile, info: zipfile.ZipInfo, where: str, schema: str, limits: Limits
 ) -> ET.Element:
-    """Parse and schema-validate (the SSP 1.0 XSDs fmpy ships) one XML member; no DTDs."""
+    """Parse and schema-validate one XML member (version 1.0: the SSP 1.0 XSDs fmpy ships; 2.0:
+    the SSP 2.0 XSDs of pyssp-standard); no DTDs."""
     kind = "SSD" if schema.startswith("SystemStructureDescription") else "parameter set"
     bad = f"malformed {kind} in {where}: {info.filename}"
     data = read_member(archive, info, where, limits.xml_bytes)
@@ -102,6 +110,9 @@ def parse_xml(
         root = ET.fromstring(data)
     except (ET.ParseError, LookupError, ValueError) as exc:  # LookupError: unknown encoding
         raise SspError(f"{bad}: {exc}") from None
+    problem = ssd2.version_problem(root)
+    if problem:
+        raise SspError(f"{bad}: {problem}")
     from lxml import etree
 
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
@@ -109,7 +120,7 @@ def parse_xml(
         doc = etree.fromstring(data, parser)
     except (etree.XMLSyntaxError, LookupError, ValueError) as exc:
         raise SspError(f"{bad}: {exc}") from None
-    checker = _schema(schema)
+    checker = ssd2.schema(schema) if root.get("version") == "2.0" else _schema(schema)
     if not checker.validate(doc):
         e = checker.error_log[0]
         message = e.message
@@ -155,7 +166,10 @@ def connectors(element: ET.Element, what: str) -> dict[str, Connector]:
             raise SspError(f"{what}: connector {name!r} is declared twice")
         t = _typed(c)
         unit = t.get("unit") if t is not None else None
-        out[name] = Connector(name, kind, _local(t.tag) if t is not None else "Real", unit)
+        clocks = tuple(required(k, "name", f"{what}: connector {name!r}")
+                       for k in c.findall("ssd:Clock", NS))  # fmt: skip
+        out[name] = Connector(name, kind, _local(t.tag) if t is not None else "Real", unit, clocks,
+                              t.get("intervalVariability") if t is not None else None)  # fmt: skip
     return out
 
 
@@ -170,12 +184,12 @@ def _parameter_set(root: ET.Element, prefix: str, what: str) -> tuple[str, list[
             raise SspError(f"{what}: parameter {name!r} has no value")
         value = required(t, "value", f"{what}: parameter {name!r}")
         kind = _local(t.tag)
-        if kind == "Real":
+        if kind in REALS:
             try:
                 float(value)
             except ValueError:
                 raise SspError(f"{what}: parameter {name!r}: {value!r} is not a number") from None
-        elif kind == "Integer" and not value.strip().lstrip("+-").isdigit():
+        elif kind in INTEGERS and not value.strip().lstrip("+-").isdigit():
             raise SspError(f"{what}: parameter {name!r}: {value!r} is not an integer")
         params.append(Parameter(prefix + name, kind, value, t.get("unit")))
     return root.get("name") or "", params
@@ -223,10 +237,18 @@ def bindings(
     return sets
 
 
-def connections(system: ET.Element, what: str) -> list[tuple[str, str, str, str]]:
+def connections(
+    system: ET.Element, what: str, clocks: list[tuple[str, str, str, str]] | None = None
+) -> list[tuple[str, str, str, str]]:
+    """The connections between components; those of a Clock connector (SSP 2.0, also to the
+    system's own connectors: element "") go to `clocks` instead."""
     out = []
     for i, e in enumerate(system.findall("ssd:Connections/ssd:Connection", NS), 1):
         here = f"{what}: connection #{i}"
+        if clocks is not None and ssd2.is_clock_connection(system, e):
+            names = ("startElement", "startConnector", "endElement", "endConnector")
+            clocks.append(tuple(e.get(a) or "" for a in names))
+            continue
         if e.get("startElement") is None or e.get("endElement") is None:
             raise SspError(f"{here}: connections to the system's own connectors are not supported")
         ends = tuple(

@@ -1,4 +1,4 @@
-"""Read an SSP 1.0 archive (.ssp) into plain data, with one-line errors for malformed input.
+"""Read an SSP 1.0 or 2.0 archive (.ssp) into plain data, with one-line errors for malformed input.
 
 Supports what the system needs: one system of FMU components, connectors with types and units,
 connections, parameter bindings with .ssv parameter sets (on the system or on components), the
@@ -18,6 +18,7 @@ import weakref
 import zipfile
 from pathlib import Path
 
+from impedance_cosim.cosim import ssd2
 from impedance_cosim.cosim.ssd import (
     Component,
     Connector,
@@ -113,10 +114,11 @@ def _read(path: Path, folder: Path, limits: Limits, ssd: str | None) -> SystemDe
         desc = _system(src, names_read[0], folder)
         for variant in names_read[1:]:  # SSP variants: the same system, other parameters
             other = _system(src, variant, folder)
-            if (other.components, other.connections, other.units) != (
+            if (other.components, other.connections, other.units, other.clock_connections) != (
                 desc.components,
                 desc.connections,
                 desc.units,
+                desc.clock_connections,
             ):
                 raise SspError(f"{where}: variant {variant} describes another system than {SSD}"
                                " (components, connections or units differ); this reader takes"
@@ -149,6 +151,7 @@ def _system(src: Source, ssd: str, folder: Path) -> SystemDescription:
             raise SspError(f"{where_ssd}: system {sysname!r}: {tag} elements are not supported")
     ctx = f"{where_ssd}: system {sysname!r}"
     sets = bindings(system, "", ctx, src)
+    version = root.get("version") or "1.0"
     components: list[Component] = []
     seen: set[str] = set()
     names = set(src.infos)
@@ -161,17 +164,23 @@ def _system(src: Source, ssd: str, folder: Path) -> SystemDescription:
             raise SspError(f"{what}: type {c.get('type')} is not an FMU")
         source = resolve_source(c.get("source"), names, what)
         _check_fmu(folder / source, f"{where}: {source}", limits)
-        comp = Component(name, source, connectors(c, what), fmu=folder / source)
+        ssd2.check_checksum(c, folder / source, what)
+        comp = Component(name, source, connectors(c, what), folder / source,
+                         c.get("implementation", "any"))  # fmt: skip
         components.append(comp)
         seen.add(name)
         sets += bindings(c, name + ".", what, src)
+    clocks: list[tuple[str, str, str, str]] = []
     desc = SystemDescription(
         name=sysname,
         components=components,
-        connections=connections(system, ctx),
+        connections=connections(system, ctx, clocks if version == "2.0" else None),
         parameter_sets={},
         units=units(root, where_ssd),
         folder=folder,
+        version=version,
+        system_connectors=connectors(system, ctx),
+        clock_connections=clocks,
     )
     # All bindings of a system apply (SSP 1.0), in order; bindings whose sets share a name (one
     # scenario bound on each component) form one parameter set. Sets of different names are
@@ -182,6 +191,7 @@ def _system(src: Source, ssd: str, folder: Path) -> SystemDescription:
         desc.variants.setdefault(key, ssd)
     experiment(root, desc, where_ssd)
     check_connections(desc, where_ssd)
+    ssd2.check_clocks(desc, where_ssd)
     return desc
 
 

@@ -153,6 +153,12 @@ def parameter_variable(name: str) -> Variable:
     raise KeyError(name)
 
 
+def bound_parameters(component: str) -> set[str]:
+    """The variables of a component that a scenario sets (its parameter connectors)."""
+    prefix = component + "."
+    return {k.removeprefix(prefix) for s in SCENARIOS.values() for k in s if k.startswith(prefix)}
+
+
 def ssd_name(scenario: str) -> str:
     """The file name of a scenario's system description in the archive (SSP 1.0: the default
     variant is SystemStructure.ssd, the other variants are further .ssd files beside it)."""
@@ -187,12 +193,7 @@ def ssd_xml(scenario: str = "observer") -> bytes:
             {"name": comp.name, "source": comp.source, "type": "application/x-fmu-sharedlibrary"},
         )
         connectors = ET.SubElement(el, _q("ssd", "Connectors"))
-        params = {
-            k.split(".", 1)[1]
-            for s in SCENARIOS.values()
-            for k in s
-            if k.startswith(comp.name + ".")
-        }
+        params = bound_parameters(comp.name)
         for v in comp.model_class.variables():
             if v.causality == "parameter" and v.name not in params:
                 continue
@@ -213,6 +214,17 @@ def ssd_xml(scenario: str = "observer") -> bytes:
             _q("ssd", "ParameterBinding"),
             {"source": f"resources/{ssv_name(scenario, comp.name)}"},
         )
+    connections_element(system)
+    if SSV_ENUMERATIONS:
+        _enumerations(root, "ssd", enumerations.values())
+    _units(root, "ssd", used_units)
+    experiment_element(root)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def connections_element(system: ET.Element) -> ET.Element:
+    """The system's Connections element, with the data connections (CONNECTIONS)."""
     connections = ET.SubElement(system, _q("ssd", "Connections"))
     for se, sc, ee, ec in CONNECTIONS:
         ET.SubElement(
@@ -220,9 +232,11 @@ def ssd_xml(scenario: str = "observer") -> bytes:
             _q("ssd", "Connection"),
             {"startElement": se, "startConnector": sc, "endElement": ee, "endConnector": ec},
         )
-    if SSV_ENUMERATIONS:
-        _enumerations(root, "ssd", enumerations.values())
-    _units(root, "ssd", used_units)
+    return connections
+
+
+def experiment_element(root: ET.Element) -> None:
+    """The DefaultExperiment (0 to STOP) with this project's master annotation (step, order)."""
     exp = ET.SubElement(
         root, _q("ssd", "DefaultExperiment"), {"startTime": "0.0", "stopTime": repr(STOP)}
     )
@@ -240,8 +254,6 @@ def ssd_xml(scenario: str = "observer") -> bytes:
             "order": " ".join(c.name for c in COMPONENTS),
         },
     )
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
 def _enumerations(root: ET.Element, prefix: str, enums: Any) -> None:

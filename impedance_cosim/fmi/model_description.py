@@ -13,6 +13,7 @@ from impedance_cosim.fmi.variables import (
     METADATA,
     SAMPLED_INPUTS,
     ModelExchange,
+    Partials,
     Variable,
     derivative_variables,
 )
@@ -73,6 +74,9 @@ def model_description(
         "canGetAndSetFMUstate": "true",
         "canSerializeFMUstate": "true",
     }
+    partials = model_exchange.partials if model_exchange else None
+    if partials:  # native/src/partials.c: fmi2GetDirectionalDerivative (ME and CS)
+        common["providesDirectionalDerivative"] = "true"
     interfaces = []
     if model_exchange:
         interfaces.append(
@@ -80,6 +84,9 @@ def model_description(
                 root, "ModelExchange", {**common, "completedIntegratorStepNotNeeded": "true"}
             )
         )
+    orders = (
+        {"maxOutputDerivativeOrder": str(partials.max_output_derivative_order)} if partials else {}
+    )
     interfaces.append(
         ET.SubElement(
             root,
@@ -88,6 +95,7 @@ def model_description(
                 **common,
                 "canHandleVariableCommunicationStepSize": "true",
                 "canInterpolateInputs": "false",
+                **orders,
             },
         )
     )
@@ -152,18 +160,34 @@ def model_description(
         deps = {"dependencies": output_dependencies}
     for i, v in enumerate(variables):
         if v.causality == "output":
-            ET.SubElement(outs, "Unknown", {"index": str(i + 1), **deps})
+            exact = exact_dependencies(partials, v.name, index)
+            ET.SubElement(outs, "Unknown", {"index": str(i + 1), **(exact or deps)})
     if model_exchange and model_exchange.states:
         ders = ET.SubElement(ms, "Derivatives")
         for v in variables:
-            if v.derivative:  # depends on states and inputs: no dependencies list (all knowns)
-                ET.SubElement(ders, "Unknown", {"index": str(index[v.name])})
+            if v.derivative:  # without partials: depends on every known (no dependencies list)
+                exact = exact_dependencies(partials, v.name, index) or {}
+                ET.SubElement(ders, "Unknown", {"index": str(index[v.name]), **exact})
     inits = ET.SubElement(ms, "InitialUnknowns")
     for i, v in enumerate(variables):
         if v.causality == "output" or v.derivative:
             ET.SubElement(inits, "Unknown", {"index": str(i + 1)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def exact_dependencies(
+    partials: Partials | None, name: str, ref: dict[str, int]
+) -> dict[str, str] | None:
+    """dependencies and dependenciesKind of an unknown from a model's Partials (ref: variable
+    name -> index (FMI 2.0) or value reference (FMI 3.0)); None when it declares none."""
+    pairs = partials.of(name) if partials else None
+    if pairs is None:
+        return None
+    if not pairs:  # depends on nothing (an empty dependenciesKind list says nothing more)
+        return {"dependencies": ""}
+    return {"dependencies": " ".join(str(ref[k]) for k, _ in pairs),
+            "dependenciesKind": " ".join(kind for _, kind in pairs)}  # fmt: skip
 
 
 def _type_definitions(root: ET.Element, units: list[str], variables: list[Variable]) -> None:

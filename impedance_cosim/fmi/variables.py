@@ -104,6 +104,22 @@ class ModelExchange:
 
     states: tuple[str, ...]
     event_indicators: int = 0
+    partials: Partials | None = None  # exact partial derivatives the native model provides
+
+
+@dataclass(frozen=True)
+class Partials:
+    """The exact partial derivatives a native model computes (model_partials in its model.c):
+    for each unknown (an output or der(<state>)) the knowns it depends on (states, inputs) with
+    their dependenciesKind, written into ModelStructure; and the highest order of the outputs'
+    time derivatives it gives in co-simulation (maxOutputDerivativeOrder)."""
+
+    dependencies: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
+    max_output_derivative_order: int = 1
+
+    def of(self, unknown: str) -> tuple[tuple[str, str], ...] | None:
+        """The (known, kind) pairs of an unknown, or None if it is not listed."""
+        return dict(self.dependencies).get(unknown)
 
 
 PER_SECOND = {"rad": "rad/s", "rad/s": "rad/s2", "m": "m/s", "m/s": "m/s2"}

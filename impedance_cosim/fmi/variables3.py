@@ -9,7 +9,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-from impedance_cosim.fmi.model_description import LOG_CATEGORIES, xml_value
+from impedance_cosim.fmi.model_description import LOG_CATEGORIES, exact_dependencies, xml_value
 from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
 from impedance_cosim.fmi.variables import (
     METADATA,
@@ -96,6 +96,12 @@ def model_description3(
         "canGetAndSetFMUState": "true",
         "canSerializeFMUState": "true",
     }
+    partials = model_exchange.partials if model_exchange and not clock else None
+    if partials:  # native/src/partials.c: fmi3GetDirectionalDerivative (ME and CS)
+        common["providesDirectionalDerivatives"] = "true"
+    orders = (
+        {"maxOutputDerivativeOrder": str(partials.max_output_derivative_order)} if partials else {}
+    )
     if clock:
         ET.SubElement(root, "ScheduledExecution", common)
     else:
@@ -113,6 +119,7 @@ def model_description3(
                 "mightReturnEarlyFromDoStep": xml_value(early_return),
                 "providesIntermediateUpdate": "false",
                 "canReturnEarlyAfterIntermediateUpdate": "false",
+                **orders,
             },
         )
     used = sorted({v.unit for v in table if v.unit} | {"s"})
@@ -208,11 +215,13 @@ def model_description3(
         dep = {} if output_dependencies is None else {"dependencies": output_dependencies}
     for vr, v in enumerate(table):
         if v.causality == "output":
-            ET.SubElement(ms, "Output", {"valueReference": str(vr), **dep})
+            exact = exact_dependencies(partials, v.name, vr_of)
+            ET.SubElement(ms, "Output", {"valueReference": str(vr), **(exact or dep)})
     if not clock:
         for vr, v in enumerate(table):
             if v.derivative:
-                ET.SubElement(ms, "ContinuousStateDerivative", {"valueReference": str(vr)})
+                exact = exact_dependencies(partials, v.name, vr_of) or {}
+                ET.SubElement(ms, "ContinuousStateDerivative", {"valueReference": str(vr), **exact})
     for vr, v in enumerate(table):  # clocked outputs are not initial unknowns
         if not clock and (v.causality == "output" or v.derivative):
             ET.SubElement(ms, "InitialUnknown", {"valueReference": str(vr)})

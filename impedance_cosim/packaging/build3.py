@@ -34,6 +34,7 @@ from impedance_cosim.packaging.build import (
     build_ssp,
     pack_native_fmu,
 )
+from impedance_cosim.packaging.build_ssp2 import build_ssp2
 from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.packaging.pyfmu_guard import guard_binaries
 from impedance_cosim.version import __version__
@@ -170,8 +171,9 @@ def _xml_python(cls, token: str) -> bytes:
 
 
 def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
-    """fmus/fmi3/: the FMI 3.0 plant and controllers, and PaperScenario-fmi3.ssp (the SSD of the
-    FMI 2.0 archive, with the FMI 3.0 plant and clock-free controller)."""
+    """fmus/fmi3/: the FMI 3.0 plant and controllers, PaperScenario-fmi3.ssp (the SSD of the
+    FMI 2.0 archive, with the FMI 3.0 plant and clock-free controller) and its SSP 2.0 edition
+    PaperScenario-fmi3-ssp2.ssp (the clocked controller, build_ssp2.py)."""
     folder = Path(out_dir) / "fmi3"
     built = [
         build_native_fmu3(FMUS["plant"], folder),
@@ -179,6 +181,7 @@ def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
         build_native_fmu3(FMUS["controller"], folder, SAMPLE_CLOCK),
     ]
     built.append(build_ssp(out_dir, "PaperScenario-fmi3", folder))
+    built.append(build_ssp2(out_dir, folder))  # the SSP 2.0 edition (clocked controller)
     try:
         import pythonfmu3  # noqa: F401
     except ImportError:

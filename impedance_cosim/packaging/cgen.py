@@ -75,8 +75,25 @@ def c_config(
                 f"static const int DERIVATIVE_VRS[N_STATES] = {{{ders}\n}};",
             ]
         lines.append("")
+    if model_exchange and model_exchange.partials:
+        lines += _partials_config(variables, model_exchange)
     lines += ["#endif", ""]
     return "\n".join(lines)
+
+
+def _partials_config(variables: list[Variable], me: ModelExchange) -> list[str]:
+    """What the partials glue (native/src/partials.c) needs: the knowns (states, then inputs)."""
+    inputs = [v.name for v in variables if v.causality == "input"]
+    knowns = "".join(f"\n    VR_{c_name(n)}," for n in (*me.states, *inputs))
+    order = me.partials.max_output_derivative_order if me.partials else 0
+    return [
+        "#define MODEL_PARTIALS 1 /* model.c implements model_partials (partials.h) */",
+        f"#define N_KNOWNS {len(me.states) + len(inputs)}",
+        f"#define MAX_OUTPUT_DERIVATIVE_ORDER {order}",
+        f"/* knowns: the states, then the inputs {', '.join(inputs)} */",
+        f"static const int KNOWN_VRS[N_KNOWNS] = {{{knowns}\n}};",
+        "",
+    ]
 
 
 def generate() -> dict[Path, str]:

@@ -58,7 +58,8 @@ def expected_members() -> list[str]:
     names += [f"fmi3/{n}.fmu" for n in fmi3]
     loops = [f"{d}/PaperClosedLoop-{s}.fmu" for d in ("native", "fmi3") for s in SCENARIOS]
     names += loops if native else []  # the closed loop as one FMU (packaging/closedloop.py)
-    return names + systems + (["PaperScenario-fmi3.ssp"] if native else [])
+    fmi3_systems = ["PaperScenario-fmi3.ssp", "PaperScenario-fmi3-ssp2.ssp"] if native else []
+    return names + systems + fmi3_systems
 
 
 def robot_members() -> list[str]:
@@ -150,7 +151,8 @@ also with its sampling as an FMI 3.0 clock, and fmus/fmi3/python/ the Python one
 Systems (SSP 1.0: the two FMUs wired; each scenario (observer, difference, measured) is a system
 description binding its own parameter set: in PaperScenario*.ssp as SSP variants
 (SystemStructure.ssd = observer, difference.ssd, measured.ssd), and alone in
-PaperScenario*-<scenario>.ssp for engines that read only SystemStructure.ssd):
+PaperScenario*-<scenario>.ssp for engines that read only SystemStructure.ssd;
+PaperScenario-fmi3-ssp2.ssp is the FMI 3.0 system as SSP 2.0, with the clocked controller):
 {ssps}
 Reference results (CSV; each FMU's default experiment, and the paper's 20 s closed loop):
 {refs}

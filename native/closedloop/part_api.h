@@ -22,6 +22,8 @@
 #define model_me_evaluate PART(model_me_evaluate)
 #define model_me_event_indicators PART(model_me_event_indicators)
 #define model_me_event_update PART(model_me_event_update)
+#define model_partials PART(model_partials)
+#define model_output_derivative PART(model_output_derivative)
 #define MODEL_STATE_REALS PART(MODEL_STATE_REALS)
 #define N_MODEL_STATE_REALS PART(N_MODEL_STATE_REALS)
 

@@ -150,4 +150,20 @@ static const int DERIVATIVE_VRS[N_STATES] = {
     VR_der_qd3,
 };
 
+#define MODEL_PARTIALS 1 /* model.c implements model_partials (partials.h) */
+#define N_KNOWNS 9
+#define MAX_OUTPUT_DERIVATIVE_ORDER 1
+/* knowns: the states, then the inputs tau1, tau2, tau3 */
+static const int KNOWN_VRS[N_KNOWNS] = {
+    VR_q1_true,
+    VR_q2_true,
+    VR_q3_true,
+    VR_qd1,
+    VR_qd2,
+    VR_qd3,
+    VR_tau1,
+    VR_tau2,
+    VR_tau3,
+};
+
 #endif

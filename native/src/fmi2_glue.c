@@ -20,6 +20,7 @@
 #include "glue.h"
 #include "guid.h" /* MODEL_GUID, written by the build */
 #include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is fmi2_me.c */
+#include "partials.h" /* directional and output derivatives (partials.c) */
 
 #define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
 #define STATE_MAGIC 0x494d5053u    /* "IMPS" */
@@ -898,9 +899,8 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         size_t nKnown, const fmi2Real dvKnown[],
                                         fmi2Real dvUnknown[])
 {
-    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
-        (void)dvUnknown;
-    return REFUSE(c, "fmi2GetDirectionalDerivative", "directional derivatives are not provided");
+    return partials_directional((Instance *)c, "fmi2GetDirectionalDerivative", vUnknown_ref,
+                                nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown);
 }
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -913,8 +913,8 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                         const fmi2Integer order[], fmi2Real value[])
 {
-    (void)vr, (void)nvr, (void)order, (void)value;
-    return REFUSE(c, "fmi2GetRealOutputDerivatives", "output derivatives are not provided");
+    return partials_output_derivatives((Instance *)c, "fmi2GetRealOutputDerivatives", vr, nvr,
+                                       order, value);
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)

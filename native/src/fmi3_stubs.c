@@ -2,6 +2,7 @@
  * no variables of, derivatives, configuration mode (see fmi3_glue.c). Each names what is missing
  * in its error message. */
 #include "fmi3_wrapper.h"
+#include "partials.h"
 
 #define NO_VARIABLES(get, set, type, name)                                                     \
     fmi3Status get(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
@@ -87,7 +88,7 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
         (void)elementIndicesOfIndependents, (void)dependencyKinds, (void)nDependencies;
     return FAIL(w, "variable dependencies are given in modelDescription.xml only");
 }
-/* --- not provided ----------------------------------------------------------------------------- */
+/* --- partial and output derivatives (partials.c); not provided ----------------------------------------------------------------------------- */
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
                                         size_t nUnknowns, const fmi3ValueReference knowns[],
@@ -95,9 +96,16 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
                                         fmi3Float64 sensitivity[], size_t nSensitivity)
 {
     WRAP("fmi3GetDirectionalDerivative");
-    (void)unknowns, (void)nUnknowns, (void)knowns, (void)nKnowns, (void)seed, (void)nSeed,
-        (void)sensitivity, (void)nSensitivity;
-    return FAIL(w, "directional derivatives are not provided");
+    if (w->kind == K_SE) {
+        return FAIL(w, "fmi3GetDirectionalDerivative: not provided in Scheduled Execution");
+    }
+    if (nSeed != nKnowns || nSensitivity != nUnknowns) { /* every variable is a scalar */
+        return FAIL(w, "fmi3GetDirectionalDerivative: nSeed (%zu) must equal nKnowns (%zu) and"
+                       " nSensitivity (%zu) nUnknowns (%zu): the variables are scalars",
+                    nSeed, nKnowns, nSensitivity, nUnknowns);
+    }
+    return status3(partials_directional(w->inner, "fmi3GetDirectionalDerivative", unknowns,
+                                        nUnknowns, knowns, nKnowns, seed, sensitivity));
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
@@ -129,8 +137,13 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance,
                                     fmi3Float64 values[], size_t nValues)
 {
     WRAP("fmi3GetOutputDerivatives");
-    (void)valueReferences, (void)nValueReferences, (void)orders, (void)values, (void)nValues;
-    return FAIL(w, "output derivatives are not provided (maxOutputDerivativeOrder=0)");
+    if (nValues != nValueReferences) { /* every variable is a scalar */
+        return FAIL(w, "fmi3GetOutputDerivatives: nValues (%zu) must equal nValueReferences"
+                       " (%zu): the variables are scalars", nValues, nValueReferences);
+    }
+    return status3(partials_output_derivatives(w->inner, "fmi3GetOutputDerivatives",
+                                               valueReferences, nValueReferences, orders,
+                                               values));
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)

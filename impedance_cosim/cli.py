@@ -109,12 +109,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> None:
-    """The console script: main(), then leave the process safely (see fmu.exit_process). A
+    """The console script: main(), then leave the process safely (see cosim.leave.exit_process). A
     Ctrl-C before a command has taken over its signals (while the modules load, the arguments
     are read) is one line and exit status 130 too, never a traceback (no FMU is loaded then:
     the commands catch their own interrupts)."""
     try:
-        from impedance_cosim.cosim.fmu import exit_process
+        from impedance_cosim.cosim.leave import exit_process
 
         status = main()
     except KeyboardInterrupt:

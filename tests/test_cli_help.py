@@ -55,3 +55,18 @@ def test_every_option_says_what_it_does_and_its_default() -> None:
 def test_each_command_parses_with_only_its_own_module(command: str) -> None:
     parser = build_parser(command)
     assert _subcommands(parser).choices[command]._actions[1:], command  # more than --help
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"]])
+def test_the_console_script_loads_nothing_heavy(argv: list[str]) -> None:
+    """entry() (what `impedance-cosim` runs) too: its safe exit must not pull fmpy in."""
+    probe = (
+        "import atexit, sys\nfrom impedance_cosim.cli import entry\n"
+        f"atexit.register(lambda: print([m for m in {HEAVY!r} if m in sys.modules],"
+        " file=sys.stderr))\n"
+        f"sys.argv = ['impedance-cosim', *{argv!r}]\nentry()\n"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          timeout=120, check=False)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == "[]", done.stderr

@@ -128,8 +128,27 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
 
     add_options(p)
     p.add_argument("--out", default=out, help=f"output folder (default {out}/)")
+    every = ("write a row every SECONDS of simulated time, a multiple of the step (default:"
+             " every step; the summary and figures use every step)")  # fmt: skip
+    p.add_argument("--output-interval", type=finite_positive, default=None, metavar="SECONDS",
+                   help=every)  # fmt: skip
+    p.add_argument("--result-format", choices=["csv", "mat"], default="csv",
+                   help="results file: csv (default) or mat, the MATLAB/Modelica result file"
+                        " Dymola and OpenModelica write (docs/running.md)")  # fmt: skip
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--no-report", action="store_true",
                    help="skip report.html (the results as one self-contained page)")  # fmt: skip
     p.add_argument("--no-progress", action="store_true",
                    help="no progress (a bar on a terminal, else a line every 10 s)")  # fmt: skip
+
+
+def output_every(interval: float | None, step: float) -> int:
+    """Rows per written row for --output-interval (1 without it); CliError unless the interval
+    is a whole multiple of the communication step."""
+    if interval is None:
+        return 1
+    every = round(interval / step)
+    if every < 1 or abs(every * step - interval) > 1e-9 * max(interval, step):
+        raise CliError(f"--output-interval {interval:g} s is not a multiple of the step"
+                       f" {step:g} s (e.g. {step:g}, {2 * step:g}, {4 * step:g})")  # fmt: skip
+    return every

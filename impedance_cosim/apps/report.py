@@ -11,11 +11,13 @@ import shlex
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from impedance_cosim.apps.html_page import esc as _e
 from impedance_cosim.apps.html_page import fixed, page, plain, png_data_uri, table
-from impedance_cosim.apps.paper_claims import PAPER, PARAMETER_CLAIMS, Run
+
+if TYPE_CHECKING:
+    from impedance_cosim.apps.paper_claims import Run
 
 REPORT_NAME = "report.html"
 MAX_TABLE_ROWS = 500  # a sweep's table in the page; the CSV has them all
@@ -116,8 +118,9 @@ def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path) -> list
     """The files this command left in the results folder."""
     files = []
     for r in record.get("runs", []):
-        if r.get("csv"):
-            files.append(f"{r['csv']} ({r.get('rows', '?')} rows, {r.get('scenario')})")
+        kept = r.get("results") or {"file": r.get("csv"), "rows": r.get("rows", "?")}
+        if kept.get("file"):
+            files.append(f"{kept['file']} ({kept.get('rows', '?')} rows, {r.get('scenario')})")
         name = f"{r.get('scenario')}_summary.json"
         if "summary" in r and (out / name).is_file():
             files.append(f"{name} (the summary)")
@@ -189,6 +192,8 @@ def _run_sections(record: Mapping[str, Any], figures: Sequence[Path], column: st
         parts.append(f"<p>{_e(main['summary'].get('diverged'))}: the paper's quantities are not"
                      " measured on a diverging loop (its rows up to the divergence are in its"
                      " CSV, its Fig. 4 below).</p>")  # fmt: skip
+    from impedance_cosim.apps.paper_claims import PAPER, PARAMETER_CLAIMS  # (loads the models)
+
     rows = []
     for c in PAPER:
         try:

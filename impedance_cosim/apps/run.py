@@ -20,6 +20,7 @@ from impedance_cosim.apps.options import (
     DEFAULT_SSP,
     REPO,
     check_out,
+    output_every,
     parse_overrides,
     prepare_out,
 )
@@ -85,7 +86,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 0
     pair = [] if args.no_figures else ["observer", "difference"]
     for scenario in [args.scenario, *(s for s in pair if s in system.parameter_sets)]:
-        _master(args, system, overrides, scenario, args.algorithm)
+        step = _master(args, system, overrides, scenario, args.algorithm).step_size
+        args.output_every = output_every(getattr(args, "output_interval", None), step)
     with FolderLock(prepare_out(out), "--out"):
         return _run_scenarios(args, ssp, overrides, out)
 
@@ -113,7 +115,6 @@ def _master(
 def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Path) -> int:
     """The chosen scenario (CSV as it runs, summary, figures) and, for Fig. 4, its pair; 1 when
     any of them failed."""
-    from impedance_cosim.cosim.results import CsvStream
     from impedance_cosim.util.atomic import WriteError
     from impedance_cosim.util.interrupt import RunInterrupted
 
@@ -126,9 +127,11 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     def run(scenario: str | None, algorithm: str | None = args.algorithm, role: str | None = None):
         master = _master(args, system, overrides, scenario, algorithm)
         stem = master.parameter_set or "run"
-        path = out / (f"{stem}-{master.algorithm}.csv" if role else f"{stem}.csv")
+        fmt, every = getattr(args, "result_format", "csv"), getattr(args, "output_every", 1)
+        path = out / (f"{stem}-{master.algorithm}.{fmt}" if role else f"{stem}.{fmt}")
         stderr, fmu_output = sys.stderr, io.StringIO()
-        with CsvStream(path) as csv, contextlib.redirect_stderr(fmu_output):
+        stream = results_stream(path, fmt, every, master)
+        with stream as csv, contextlib.redirect_stderr(fmu_output):
             try:
                 result = master.run(progress=progress and stderr, sink=csv.write)
             except RunInterrupted as exc:
@@ -144,13 +147,16 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
             finally:
                 echo_fmu_output(fmu_output.getvalue(), stderr)
         written.append(path)
-        runs.append(provenance.run_entry(master, result, overrides, path))
+        runs.append(provenance.run_entry(master, result, overrides, path if fmt == "csv" else None))
+        runs[-1]["results"] = {"file": path.name, "format": fmt, "rows": csv.rows,
+                               "output_interval_s": every * master.step_size}  # fmt: skip
         if role:
             runs[-1]["role"] = role
         span = result.data[-1, 0] - result.data[0, 0] if len(result.data) else 0.0
         rtf = span / max(result.wall_time, 1e-9)
         status = {"ok": "ok", "diverged": str(result.divergence)}.get(result.status, "FAILED")
-        print(f"{stem}{f' ({role})' if role else ''}: {status}, {len(result.data)} rows -> {path} "
+        rows = f"{len(result.data)} rows" + (f", {csv.rows} written" if every > 1 else "")
+        print(f"{stem}{f' ({role})' if role else ''}: {status}, {rows} -> {path} "
               f"({result.wall_time:.2f} s wall, {rtf:.1f}x real time)")  # fmt: skip
         if result.status == "failed":
             error = " ".join(result.error.split())
@@ -251,7 +257,9 @@ def remove_stale(args: argparse.Namespace, out: Path, system, owned: list[Path])
 
     names = set(CAPTIONS)
     for ps in [*system.parameter_sets, "run"]:
-        names |= {f"{ps}.csv", f"{ps}_summary.json", f"{ps}-jacobi.csv", f"{ps}-gauss-seidel.csv"}
+        names |= {f"{ps}_summary.json"}
+        for fmt in ("csv", "mat"):
+            names |= {f"{ps}.{fmt}", f"{ps}-jacobi.{fmt}", f"{ps}-gauss-seidel.{fmt}"}
     keep = {p.name for p in owned}
     removed = []
     for name in sorted(names - keep):
@@ -261,6 +269,27 @@ def remove_stale(args: argparse.Namespace, out: Path, system, owned: list[Path])
     if removed:
         print(f"impedance-cosim {args.command}: removed {len(removed)} file(s) of an earlier run"
               f" from {out}/: {', '.join(removed)}", file=sys.stderr)  # fmt: skip
+
+
+def results_stream(path: Path, fmt: str, every: int, master):
+    """The sink that writes a run's rows (every `every`-th): a CSV as it runs, or a result file
+    (.mat, cosim/result_mat.py) with the variables' descriptions and the run's parameters."""
+    from impedance_cosim.cosim.results import CsvStream
+
+    if fmt == "csv":
+        return CsvStream(path, every=every)
+    from impedance_cosim.cosim.result_mat import MatStream
+
+    units = provenance.signal_units(master, [])
+    texts = {}
+    for comp, md in master.descriptions.items():
+        for v in md.modelVariables:
+            unit = v.unit or getattr(v.declaredType, "unit", None)
+            texts[f"{comp}.{v.name}"] = (v.description or "") + (f" [{unit}]" if unit else "")
+    texts["time"] = f"Time [{units['time']}]"
+    numbers = {f"{c}.{k}": float(v) for c, p in master.parameters.items() for k, v in p.items()
+               if isinstance(v, int | float)}  # fmt: skip
+    return MatStream(path, every, texts, numbers)
 
 
 def _figure(draw, path: Path, *runs) -> Path:

@@ -16,7 +16,7 @@ import stat
 import unicodedata
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -251,9 +251,12 @@ def unpack(
     where: str,
     limits: Limits = DEFAULT_LIMITS,
     kind: str = "a zip archive",
+    wanted: Callable[[str], bool] | None = None,
 ) -> list[zipfile.ZipInfo]:
-    """Check the archive (`checked`) and extract its files into the existing folder, counting
-    the bytes unpacked against the same limits; returns the file members."""
+    """Check the archive (`checked`: every member) and extract its files (those whose name is
+    `wanted`, default all) into the existing folder, counting the bytes unpacked against the
+    same limits; returns the file members."""
     with checked(path, where, limits, kind) as (archive, files):
-        extract(archive, files, folder, where, limits)
+        chosen = files if wanted is None else [f for f in files if wanted(f.filename)]
+        extract(archive, chosen, folder, where, limits)
     return files

@@ -4,15 +4,13 @@ status checked, every log message kept, state save/restore. The building block o
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import ctypes
 import math
-import os
 import sys
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 from fmpy import calloc, free
 from fmpy.fmi1 import FMICallException
@@ -25,6 +23,9 @@ from fmpy.fmi2 import (
 )
 
 from impedance_cosim.cosim.fmu_files import FmuError, extractions
+from impedance_cosim.cosim.leave import exit_process as exit_process
+from impedance_cosim.cosim.leave import fmu_library_loaded as fmu_library_loaded
+from impedance_cosim.cosim.leave import leaked_libraries
 
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 # pythonfmu's C++ layer logs, after the FMU's own message, "Fatal py exception encountered:
@@ -33,38 +34,9 @@ PYTHONFMU_NOISE = ("py exception encountered", "PyObject_CallMethod")
 INT32 = (-(2**31), 2**31 - 1)  # range of fmi2Integer
 
 
-# FMU libraries left loaded after fmi2Fatal (see FmuInstance.free)
-_leaked_libraries: list[str] = []
-
-
-def fmu_library_loaded() -> bool:
-    """True while a library loaded from an FMU (`.../binaries/<platform>/<id>.so`) is still in
-    this process. Freeing the instance does not unload a pythonfmu 0.7 library: its C++ unique
-    symbols make dlclose a no-op. Without /proc: whenever fmpy was imported."""
-    if _leaked_libraries:
-        return True
-    try:
-        with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
-            return any("/binaries/" in line for line in maps)
-    except OSError:
-        return "fmpy" in sys.modules
-
-
-def exit_process(code: int) -> NoReturn:
-    """Leave the process with `code`. While an FMU's library is loaded (fmu_library_loaded),
-    skip the C library destructors: pythonfmu 0.7's `finalizePythonInterpreter` runs at exit on
-    a static already destroyed and corrupts the heap (valgrind shows the read after every
-    process that loaded a Python FMU, freed or not; glibc then aborts, exit -6, in some runs).
-    Python's own exit work (atexit, flushing) still runs first."""
-    if not fmu_library_loaded():
-        sys.exit(code)
-    atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(code)
+# The libraries left loaded after fmi2Fatal, and leaving the process safely: cosim/leave.py
+# (standard library only, for the command line's quick answers); named here too for the callers.
+_leaked_libraries = leaked_libraries
 
 
 class FmuInstance:

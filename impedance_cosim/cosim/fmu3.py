@@ -29,14 +29,10 @@ def is_fmi3(description: Any) -> bool:
 
 def open_fmu(fmu: str | Path, instance_name: str, logging_on: bool = True) -> FmuInstance:
     """An instantiated co-simulation FMU of either standard (FmuInstance or FmuInstance3)."""
-    from fmpy import read_model_description
+    from impedance_cosim.cosim.fmu_files import model_description
 
-    from impedance_cosim.cosim.fmu_files import check_fmu_archive
-
-    if Path(fmu).is_file():
-        check_fmu_archive(Path(fmu).resolve())  # before fmpy reads a member
-    try:
-        md = read_model_description(str(fmu), validate=False)
+    try:  # checked before fmpy reads a member; parsed once per file version
+        md = model_description(Path(fmu).resolve())
     except Exception:  # FmuInstance reports an unreadable archive with its own message
         return FmuInstance(fmu, instance_name, logging_on)
     if not md.fmiVersion.startswith("3"):

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 
 from impedance_cosim.util import atomic
 
@@ -127,19 +128,50 @@ class Feed:
 
 
 def format_rows(data: np.ndarray) -> str:
-    """Rows as CSV lines (repr of each value: exact round trip)."""
+    """Rows as CSV lines, each value exactly Python's repr (the shortest text that reads back to
+    the same double). orjson writes the same shortest digits ~20x faster, spelled as repr
+    spells them except for 1e-9 <= |x| < 1e-4 ("0.000012" for "1.2e-05", "1e-7" for "1e-07"):
+    those values are written with repr into the places orjson left for them. Non-finite
+    values (orjson: null) and anything not a 2-D float64 array take the plain repr path."""
+    data = np.asarray(data)
+    if data.ndim != 2 or data.dtype != np.float64 or not len(data) or not np.isfinite(data).all():
+        return _repr_rows(data)
+    size = np.abs(data)
+    own = (size >= 0.9e-9) & (size < 1.1e-4)  # orjson's spelling differs (a margin either side)
+    values, placed = data[own].tolist(), data  # row by row: the order of the text
+    if values:
+        placed = data.copy()
+        placed[own] = _PLACE
+    text = orjson.dumps(np.ascontiguousarray(placed), option=orjson.OPT_SERIALIZE_NUMPY)
+    if values:
+        pieces = text.split(_PLACE_TEXT)
+        if len(pieces) != len(values) + 1:  # the placeholder value is in the data itself
+            return _repr_rows(data)
+        spliced = [b""] * (2 * len(pieces) - 1)
+        spliced[::2], spliced[1::2] = pieces, [repr(v).encode() for v in values]
+        text = b"".join(spliced)
+    return text[2:-2].replace(b"],[", b"\n").decode() + "\n"
+
+
+_PLACE = -8.98846567431158e307  # a placeholder no result holds (one that does: the repr path)
+_PLACE_TEXT = orjson.dumps(_PLACE)
+
+
+def _repr_rows(data: np.ndarray) -> str:
     return "".join(",".join(map(repr, row)) + "\n" for row in data.tolist())
 
 
 class CsvStream:
     """A results CSV appended block by block (see module docstring). Use as a context manager;
     `write(names, rows)` is the sink the master calls. keep_partial=False: on a failed write
-    nothing is kept (for a table whose rows are still in memory, e.g. Result.to_csv)."""
+    nothing is kept (for a table whose rows are still in memory, e.g. Result.to_csv). every=k:
+    only every k-th row reaches the file (the first, k + 1-th, ...: --output-interval)."""
 
-    def __init__(self, path: str | Path, keep_partial: bool = True) -> None:
+    def __init__(self, path: str | Path, keep_partial: bool = True, every: int = 1) -> None:
         self.path, self.keep_partial = Path(path), keep_partial
         self.names: list[str] | None = None
-        self.rows = 0
+        self.rows = 0  # rows in the file
+        self.every, self._seen = every, 0  # rows given to write()
         self._last: float | None = None  # the time of the last row written
         try:
             self._tmp: Path | None = atomic.temp_path(self.path)
@@ -162,6 +194,7 @@ class CsvStream:
             text = ",".join(_quote(n) for n in self.names) + "\n"
         elif list(names) != self.names:
             raise ValueError(f"{self.path.name}: columns changed during the run")
+        rows, self._seen = every_kth(rows, self._seen, self.every), self._seen + len(rows)
         if len(rows):
             text += format_rows(np.asarray(rows, dtype=float))
         try:
@@ -213,6 +246,14 @@ class CsvStream:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def every_kth(rows: np.ndarray, seen: int, every: int) -> np.ndarray:
+    """The rows of a block whose index in the whole run (the block starts at row `seen`) is a
+    multiple of every."""
+    if every == 1:
+        return rows
+    return np.asarray(rows)[(-seen) % every :: every]
 
 
 def write_csv(path: str | Path, names: list[str], data: np.ndarray) -> None:

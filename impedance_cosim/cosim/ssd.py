@@ -15,8 +15,14 @@ from typing import Any
 
 from impedance_cosim.cosim import ssd2
 from impedance_cosim.cosim.ssd2 import INTEGERS, REALS, TYPES
-from impedance_cosim.cosim.ssp_archive import Limits, SspError, read_member, resolve_source
-from impedance_cosim.cosim.system import ANNOTATION_TYPE, NS
+from impedance_cosim.cosim.ssp_archive import (
+    ANNOTATION_TYPE,
+    NS,
+    Limits,
+    SspError,
+    read_member,
+    resolve_source,
+)
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.ssp_archive import SspError
-from impedance_cosim.cosim.system import NS
+from impedance_cosim.cosim.ssp_archive import NS, SspError
 
 VERSIONS = ("1.0", "2.0")
 REALS = ("Real", "Float64", "Float32")

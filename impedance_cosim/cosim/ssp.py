@@ -36,6 +36,7 @@ from impedance_cosim.cosim.ssd import (
 )
 from impedance_cosim.cosim.ssp_archive import (
     DEFAULT_LIMITS,
+    NS,
     ArchiveError,
     Limits,
     SspError,
@@ -44,7 +45,6 @@ from impedance_cosim.cosim.ssp_archive import (
     extract,
     resolve_source,
 )
-from impedance_cosim.cosim.system import NS
 
 __all__ = ["Component", "Connector", "Limits", "Parameter", "SspError", "SystemDescription"]
 __all__ += ["read_ssp"]

@@ -5,6 +5,7 @@ the FMUs in it alike) are in archive.py and re-exported here."""
 from __future__ import annotations
 
 import urllib.parse
+import xml.etree.ElementTree as ET
 from collections.abc import Collection
 
 from impedance_cosim.cosim.archive import (
@@ -25,6 +26,16 @@ from impedance_cosim.cosim.archive import (
 __all__ = ["DEFAULT_LIMITS", "ArchiveError", "Limits", "SspError", "check_archive"]
 __all__ += ["check_members", "checked", "declared_members", "extract", "open_zip", "read_member"]
 __all__ += ["resolve_source", "unpack"]
+
+# The SSP 1.0 namespaces (the reader's and the writer's, cosim/system.py) and our annotation
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+}
+for _prefix, _uri in NS.items():
+    ET.register_namespace(_prefix, _uri)
+ANNOTATION_TYPE = "org.impedance-cosim.master"
 
 
 class SspError(ArchiveError):

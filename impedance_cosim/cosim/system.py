@@ -17,19 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from controller_model.model import ControllerModel
+from impedance_cosim.cosim.ssp_archive import ANNOTATION_TYPE as ANNOTATION_TYPE
+from impedance_cosim.cosim.ssp_archive import NS as NS
 from impedance_cosim.fmi.units import UNITS
 from impedance_cosim.fmi.variables import AUTHOR, COPYRIGHT, Variable
 from impedance_cosim.version import __version__
 from plant_model.model import PlantModel
 
-NS = {
-    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
-    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
-    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
-}
-for _prefix, _uri in NS.items():
-    ET.register_namespace(_prefix, _uri)
-ANNOTATION_TYPE = "org.impedance-cosim.master"
 # SSP 1.0 top-level meta-data (ssc:ATopLevelMetaData) of the SSD and every SSV.
 META = {"author": AUTHOR, "fileversion": __version__, "copyright": COPYRIGHT,
         "license": "BSD-2-Clause"}  # fmt: skip

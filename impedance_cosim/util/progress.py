@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
-from tqdm import tqdm
+if TYPE_CHECKING:  # tqdm loads when a bar or a line is shown (a run without one never needs it)
+    from tqdm import tqdm
 
 
 class Progress:
@@ -35,6 +36,8 @@ class Progress:
         self._printed, self._printed_n = False, -1
         self._bar: tqdm | None = None
         if enabled and _is_terminal(self.stream):
+            from tqdm import tqdm
+
             self._bar = tqdm(total=total, desc=desc, unit=unit, file=self.stream, delay=delay,
                              dynamic_ncols=True, leave=True)  # fmt: skip
 
@@ -69,6 +72,8 @@ class Progress:
         self.close()
 
     def _line(self, now: float) -> None:
+        from tqdm import tqdm
+
         text = tqdm.format_meter(self.n, self.total, now - self.start, prefix=self.desc,
                                  unit=self.unit, postfix=self.postfix or None, ncols=0)  # fmt: skip
         try:

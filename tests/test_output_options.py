@@ -1,0 +1,80 @@
+"""`--output-interval` (every k-th row to the file, the summary from every step) and
+`--result-format mat` (the Dymola/OpenModelica result file, read back with buildingspy: the
+same float64 bits as the CSV)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from impedance_cosim.cli import main
+
+
+def run(native_ssp, out, *extra: str) -> int:
+    return main(["run", "--ssp", str(native_ssp), "--stop", "4.5", "--no-figures", "--no-report",
+                 "--no-progress", "--out", str(out), *extra])  # fmt: skip
+
+
+def csv_columns(path) -> tuple[list[str], np.ndarray]:
+    lines = path.read_text().splitlines()
+    return lines[0].split(","), np.array([[float(v) for v in li.split(",")] for li in lines[1:]])
+
+
+def test_output_interval_writes_every_kth_row_and_summarizes_every_step(native_ssp, tmp_path):
+    assert run(native_ssp, tmp_path / "full") == 0
+    assert run(native_ssp, tmp_path / "every4", "--output-interval", "0.01") == 0
+    full = (tmp_path / "full" / "observer.csv").read_text().splitlines()
+    every4 = (tmp_path / "every4" / "observer.csv").read_text().splitlines()
+    assert every4 == [full[0], *full[1::4]] and len(every4) == 1 + 451
+    # the impact peak needs every step: the summaries are the same
+    summary = [json.loads((tmp_path / d / "observer_summary.json").read_text())
+               for d in ("full", "every4")]  # fmt: skip
+    assert summary[0] == summary[1] and summary[0]["impact_peak_N"] > 40
+    entry = json.loads((tmp_path / "every4" / "run.json").read_text())["runs"][0]
+    assert entry["results"] == {"file": "observer.csv", "format": "csv", "rows": 451,
+                                "output_interval_s": 0.01}  # fmt: skip
+    assert entry["rows"] == 1801  # the run's own rows
+
+
+@pytest.mark.parametrize("interval", ["0.003", "0.001"])
+def test_an_interval_not_a_multiple_of_the_step_is_bad_input(native_ssp, tmp_path, capsys,
+                                                             interval: str) -> None:  # fmt: skip
+    assert run(native_ssp, tmp_path / "out", "--output-interval", interval) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"impedance-cosim run: error: --output-interval {interval} s is not a multiple"
+                   " of the step 0.0025 s (e.g. 0.0025, 0.005, 0.01)"]  # fmt: skip
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("interval", [[], ["--output-interval", "0.005"]])
+def test_mat_results_read_back_with_buildingspy_bit_for_bit(native_ssp, tmp_path, interval):
+    from buildingspy.io.outputfile import Reader
+
+    assert run(native_ssp, tmp_path / "csv", *interval) == 0
+    assert run(native_ssp, tmp_path / "mat", "--result-format", "mat", *interval) == 0
+    names, data = csv_columns(tmp_path / "csv" / "observer.csv")
+    mat = Reader(str(tmp_path / "mat" / "observer.mat"), "dymola")
+    assert set(names[1:]) <= set(mat.varNames())
+    for k, name in enumerate(names[1:], start=1):
+        time, values = mat.values(name)
+        assert time.tobytes() == data[:, 0].tobytes(), name
+        assert values.tobytes() == data[:, k].tobytes(), name
+    entry = json.loads((tmp_path / "mat" / "run.json").read_text())["runs"][0]
+    parameter = next(iter(entry["parameters"]["controller"].items()))
+    assert mat.max(f"controller.{parameter[0]}") == pytest.approx(float(parameter[1]))
+    assert entry["results"]["file"] == "observer.mat" and "csv" not in entry
+    assert not (tmp_path / "mat" / "observer.csv").exists()
+
+
+def test_mat_descriptions_carry_the_units(native_ssp, tmp_path):
+    import scipy.io
+
+    assert run(native_ssp, tmp_path, "--result-format", "mat", "--stop", "0.1") == 0
+    mat = scipy.io.loadmat(tmp_path / "observer.mat", chars_as_strings=False)
+    assert ["".join(r).rstrip() for r in mat["Aclass"]] == ["Atrajectory", "1.1", "", "binTrans"]
+    names = ["".join(c).rstrip() for c in zip(*mat["name"], strict=True)]
+    texts = dict(zip(names, ["".join(c).rstrip() for c in zip(*mat["description"], strict=True)],
+                     strict=True))  # fmt: skip
+    assert texts["time"] == "Time [s]" and texts["plant.contact_force"].endswith("[N]")

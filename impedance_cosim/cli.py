@@ -76,8 +76,9 @@ def add_build(sub) -> None:
     p.add_argument("--out", default=str(REPO / "fmus"),
                    help="output folder (default: the repository's fmus/)")  # fmt: skip
     p.add_argument("--only", action="append",
-                   choices=["plant", "controller", "bridge", "pinocchio", "mujoco"],
-                   help="build only this FMU (repeatable; skips the .ssp)")  # fmt: skip
+                   choices=["plant", "controller", "bridge", "pinocchio", "mujoco", "closedloop"],
+                   help="build only this FMU (repeatable; skips the .ssp; closedloop: the"
+                   " closed-loop FMUs)")  # fmt: skip
     p.set_defaults(func=run_cmd.cmd_build)
 
 

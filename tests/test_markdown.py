@@ -130,7 +130,7 @@ def built() -> Path:
 
     fmus = REPO / "fmus"
     names = ["PaperScenario.ssp", "PaperScenario-native.ssp", "PaperScenario-fmi3.ssp",
-             "PaperScenario-fmi3-ssp2.ssp"]  # fmt: skip
+             "PaperScenario-fmi3-ssp2.ssp", "native/PaperClosedLoop-observer.fmu"]  # fmt: skip
     if any(stale(fmus / n) for n in [*names, "BridgePlant.fmu"]):
         subprocess.run(
             [sys.executable, "-m", "impedance_cosim", "build"], cwd=REPO, env=environment(),

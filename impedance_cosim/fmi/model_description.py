@@ -38,6 +38,7 @@ def model_description(
     needs_execution_tool: bool = False,
     source_files: list[str] | None = None,
     model_exchange: ModelExchange | None = None,
+    naming: str = "flat",
 ) -> bytes:
     """Complete FMI 2.0 modelDescription.xml for a model's variable table: co-simulation, plus
     Model Exchange (state derivatives appended as der(<state>) locals) when model_exchange is given.
@@ -45,7 +46,8 @@ def model_description(
     output_dependencies: None means outputs may depend on every input (conservative); "" declares
     that no output depends directly on an input (no algebraic loop through this FMU); under
     Model Exchange the outputs then depend on the continuous states only. SAMPLED_INPUTS: every
-    output depends on every input, but only at sample instants (dependenciesKind "discrete")."""
+    output depends on every input, but only at sample instants (dependenciesKind "discrete").
+    naming: the variableNamingConvention ("structured" for names like plant.q1: the closed loop)."""
     if model_exchange:
         variables = [*variables, *derivative_variables(variables, model_exchange)]
     index = {v.name: i + 1 for i, v in enumerate(variables)}
@@ -58,7 +60,7 @@ def model_description(
             "description": description,
             **METADATA,
             "generationTool": generation_tool,
-            "variableNamingConvention": "flat",
+            "variableNamingConvention": naming,
             "numberOfEventIndicators": str(
                 model_exchange.event_indicators if model_exchange else 0
             ),

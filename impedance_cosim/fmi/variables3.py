@@ -67,11 +67,13 @@ def model_description3(
     model_exchange: ModelExchange | None = None,
     clock: SampleClock | None = None,
     early_return: bool = False,
+    naming: str = "flat",
 ) -> bytes:
     """Complete FMI 3.0 modelDescription.xml: Co-Simulation (without event mode) and, with
     model_exchange, Model Exchange; with clock, Scheduled Execution instead of both, the model's
     inputs and outputs then clocked by it. output_dependencies as in the FMI 2.0 writer;
-    early_return: fmi3DoStep may return early (at the plant's contact) if the importer allows."""
+    early_return: fmi3DoStep may return early (at the plant's contact) if the importer allows;
+    naming: the variableNamingConvention, as in the FMI 2.0 writer."""
     table = full_table(variables, model_exchange)
     ext = extras(len(table), model_exchange, clock)
     vr_of = {v.name: vr for vr, v in enumerate(table)}
@@ -84,7 +86,7 @@ def model_description3(
             "description": description,
             **METADATA,
             "generationTool": generation_tool,
-            "variableNamingConvention": "flat",
+            "variableNamingConvention": naming,
         },
     )
     common = {

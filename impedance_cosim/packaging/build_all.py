@@ -23,6 +23,7 @@ from impedance_cosim.packaging.build import (
 )
 
 STAGE_PREFIX = ".impcosim-build-"  # the folder inside out_dir that a build writes first
+CLOSED_LOOP = "closedloop"  # --only key: the closed-loop FMUs (packaging/closedloop.py)
 
 
 def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> list[Path]:
@@ -31,9 +32,9 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
     atomic rename per file) only when all of it built: a failed or interrupted build leaves
     out_dir as it was, and concurrent builds into one folder each finish whole."""
     keys = only or list(FMUS)
-    unknown = [k for k in keys if k not in FMUS]
+    unknown = [k for k in keys if k not in FMUS and k != CLOSED_LOOP]
     if unknown:
-        raise ValueError(f"unknown FMU {unknown}; choose from {sorted(FMUS)}")
+        raise ValueError(f"unknown FMU {unknown}; choose from {sorted([*FMUS, CLOSED_LOOP])}")
     out_dir = Path(out_dir)
     created = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -73,9 +74,10 @@ def _move_into_place(path: Path, stage: Path, out_dir: Path) -> Path:
 
 def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
     """The build itself, into out_dir (build_all's temporary folder)."""
-    built = [build_fmu(FMUS[k], out_dir) for k in keys]
-    native = [k for k in keys if (NATIVE / k / "model.c").is_file()]
-    problem = toolchains.BY_PLATFORM["linux64"].problem() if native else None
+    built = [build_fmu(FMUS[k], out_dir) for k in keys if k in FMUS]
+    native = [k for k in keys if k in FMUS and (NATIVE / k / "model.c").is_file()]
+    closed_loop = CLOSED_LOOP in keys
+    problem = toolchains.BY_PLATFORM["linux64"].problem() if native or closed_loop else None
     if problem is not None:  # absent, or there but unable to compile: the Python FMUs still build
         linux64 = toolchains.BY_PLATFORM["linux64"]
         if linux64.available() and toolchains.require_platforms():
@@ -83,6 +85,8 @@ def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
         print(f"warning: no working C compiler (gcc or $CC: {problem}): the native FMUs are not"
               f" built (on Debian/Ubuntu: apt-get install {toolchains.packages(linux64)})",
               file=sys.stderr)  # fmt: skip
+        if closed_loop and not everything:
+            raise toolchains.CompileError(f"{problem}: the closed-loop FMUs need a C compiler")
         native = []
     built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in native]
     if everything:
@@ -102,4 +106,8 @@ def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
         from impedance_cosim.packaging.robot_files import write_robot_files  # URDF and MJCF
 
         built += write_robot_files(Path(out_dir) / "robot")
+    if (everything and native) or (closed_loop and not everything):
+        from impedance_cosim.packaging.closedloop import build_closed_loops  # one-FMU loops
+
+        built += build_closed_loops(out_dir)
     return built

@@ -26,8 +26,9 @@ def _c_double(value: float | int | bool) -> str:
 
 
 def c_name(name: str) -> str:
-    """The C identifier part of a variable name: der(q1_true) -> der_q1_true."""
-    return name.replace("(", "_").replace(")", "")
+    """The C identifier part of a variable name: der(q1_true) -> der_q1_true, plant.q1 ->
+    plant_q1."""
+    return name.replace("(", "_").replace(")", "").replace(".", "_")
 
 
 def c_config(

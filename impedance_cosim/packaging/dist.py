@@ -56,6 +56,8 @@ def expected_members() -> list[str]:
                for s in ("", *(f"-{name}" for name in SCENARIOS))]  # fmt: skip
     fmi3 = ["PumaPlant", "ImpedanceController", "ImpedanceControllerClocked"] if native else []
     names += [f"fmi3/{n}.fmu" for n in fmi3]
+    loops = [f"{d}/PaperClosedLoop-{s}.fmu" for d in ("native", "fmi3") for s in SCENARIOS]
+    names += loops if native else []  # the closed loop as one FMU (packaging/closedloop.py)
     fmi3_systems = ["PaperScenario-fmi3.ssp", "PaperScenario-fmi3-ssp2.ssp"] if native else []
     return names + systems + fmi3_systems
 
@@ -137,7 +139,8 @@ def readme(members: dict[str, bytes]) -> str:
 
 The paper's reduced-order velocity observer + impedance controller and its 3-DOF planar
 PUMA-560 subset touching a stiff wall, as {standards} FMUs (Co-Simulation; the
-native ones also Model Exchange) and SSP 1.0 systems.
+native plant and controller also Model Exchange; PaperClosedLoop-<scenario>: the whole closed
+loop as one FMU) and SSP 1.0 systems.
 Each FMU documents itself: open documentation/index.html inside it (unzip it first); it
 lists every variable with unit, range, default and meaning, the equations and the interfaces.
 

@@ -38,8 +38,18 @@ typedef struct {
     int tunable; /* a parameter that may be set between steps (CS) or in Event Mode (ME) */
 } VarInfo;
 
+/* A model compiled as a part of another FMU (native/closedloop) names its own headers:
+ * MODEL_CONFIG_HEADER and MODEL_STATE_HEADER, defined before this file is included. */
+#ifdef MODEL_CONFIG_HEADER
+#include MODEL_CONFIG_HEADER
+#else
 #include "config.h" /* N_VARS, VR_<name>, MODEL_IDENTIFIER_STR, VARS[] */
-#include "model.h"  /* ModelState */
+#endif
+#ifdef MODEL_STATE_HEADER
+#include MODEL_STATE_HEADER
+#else
+#include "model.h" /* ModelState */
+#endif
 
 typedef struct {
     double r[N_VARS];

@@ -6,8 +6,14 @@
 
 #include "glue.h"
 
+/* ME_OFFERED 0 in config.h: the model has the Model Exchange side the FMI 3 layer compiles
+ * against, but does not offer it (the closed loop: co-simulation only). */
+#ifndef ME_OFFERED
+#define ME_OFFERED 1
+#endif
+
 #ifdef MODEL_EXCHANGE
-#define ME_SUPPORTED 1
+#define ME_SUPPORTED ME_OFFERED
 
 /* What an event update tells the host (fmi2EventInfo, in model terms). */
 typedef struct {

@@ -3,7 +3,10 @@ the master's communication steps, each event handled in Event Mode, on the FMI 3
 
 from __future__ import annotations
 
+import json
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -46,3 +49,21 @@ def test_event_exact_run_stops_at_each_switch_and_keeps_the_sampled_rows(
         assert times[k - 1] < t < times[k]  # strictly inside a communication step
         assert (force[k] > 0.0) != (force[k - 1] > 0.0)  # the row after shows the switch
     assert np.array_equal(exact.data, fixed.data)
+
+
+def test_run_cli_event_exact_writes_the_fixed_step_rows(fmu_dir, fmi3_dir, tmp_path):
+    """`run --event-exact` over the first contact (3.85 s): the same CSV as the fixed step."""
+    csvs = []
+    for flag in ([], ["--event-exact"]):
+        out = tmp_path / f"out{len(flag)}"
+        cmd = [sys.executable, "-m", "impedance_cosim.cli", "run", "--ssp",
+               str(fmu_dir / "PaperScenario-fmi3.ssp"), "--stop", "4", "--no-figures",
+               "--no-progress", "--out", str(out), *flag]  # fmt: skip
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        (csv,) = out.rglob("*.csv")
+        csvs.append(csv.read_bytes())
+        summary = json.loads((out / "observer_summary.json").read_text())
+    assert csvs[0] == csvs[1] and len(csvs[0]) > 1000
+    (switch,) = summary["events"]["plant"]  # the contact closes once before 4 s
+    assert 3.8 < switch < 3.9 and f"plant events (event-exact): {switch:.9f} s" in done.stdout

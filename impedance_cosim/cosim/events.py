@@ -106,7 +106,8 @@ class _Opener:
 
 class EventExactMaster(Master):
     """Master (same arguments, Python loop) stepping the FMUs with event mode event-exactly;
-    after run(), events maps each such component to its event times."""
+    after run(), events (and the result's info["events"]) maps each such component to its
+    event times."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.update(loop="python", instances=_Opener())
@@ -119,4 +120,5 @@ class EventExactMaster(Master):
         result = super().run(*args, **kwargs)
         self.events = {n: list(f.events) for n, f in self.instances.opened.items()
                        if isinstance(f, EventInstance)}  # fmt: skip
+        result.info["events"] = self.events
         return result

@@ -109,6 +109,8 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     fmi2Status s;
     double t = currentCommunicationPoint;
     const double t_end = currentCommunicationPoint + communicationStepSize;
+    ModelState backup_m; /* a step that fails past a switch is undone whole (fmi3Discard) */
+    double backup_r[N_VARS];
     WRAP("fmi3DoStep");
     if (w->kind != K_CS) {
         return FAIL(w, "fmi3DoStep: this instance is not for co-simulation");
@@ -122,10 +124,17 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *eventHandlingNeeded = fmi3False;
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
+    backup_m = w->inner->s.d.m;
+    memcpy(backup_r, w->inner->s.d.r, sizeof backup_r);
     for (;;) {
         w->reached = t_end;
         s = fmi2DoStep(w->inner, t, t_end - t,
                        noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
+        if (s != fmi2OK && t > currentCommunicationPoint) {
+            w->inner->s.d.m = backup_m;
+            memcpy(w->inner->s.d.r, backup_r, sizeof backup_r);
+            w->inner->s.last_time = currentCommunicationPoint;
+        }
         if (s != fmi2OK || !(w->reached < t_end)) {
             break;
         }

@@ -109,6 +109,7 @@ def _master(
         fmu_files=getattr(args, "fmu_files", None),
         realtime=realtime_setting(args),
         overrides_origin="given with --set",
+        extrapolation=getattr(args, "extrapolation", "none"),
     )
 
 

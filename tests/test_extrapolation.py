@@ -1,0 +1,169 @@
+"""The master's input extrapolation (extrapolation="linear", Jacobi): the controller's inputs are
+the plant's outputs plus h times their time derivatives, checked against a hand computation from
+what the plant reports (fmpy's own getRealOutputDerivatives) over a few steps; Gauss-Seidel, the
+C loop and FMUs without output derivatives refused with one line; run.json records it."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from impedance_cosim.cli import main
+from impedance_cosim.cosim.fmu import FmuInstance
+from impedance_cosim.cosim.master import Master, MasterError
+from impedance_cosim.cosim.ssp import read_ssp
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
+
+H = 1 / 400
+STEPS = 6
+
+
+def _spied_run(monkeypatch, native_ssp, extrapolation: str, scenario: str = "observer"):
+    """Run STEPS Jacobi steps; return (result, events, controller sources): events are the
+    controller's input writes ("set", values) and, after each plant step and its
+    initialization, the plant's outputs and their derivatives through fmpy ("y", y, dy)."""
+    events: list[tuple] = []
+    setter, step, exit_init = (FmuInstance.real_setter, FmuInstance.step,
+                               FmuInstance.exit_initialization)  # fmt: skip
+    system = read_ssp(native_ssp)
+    sources = [sc for se, sc, ee, _ in system.connections if ee == "controller"]
+    outputs = [sc for se, sc, ee, _ in system.connections if se == "plant"]
+
+    def observe(fmu: FmuInstance) -> None:
+        if fmu.name == "plant":
+            refs = [fmu.vr(n) for n in outputs]
+            dy = fmu.slave.getRealOutputDerivatives(refs, [1] * len(refs))
+            events.append(("y", dict(zip(outputs, fmu.get(outputs), strict=True)),
+                           dict(zip(outputs, dy, strict=True))))  # fmt: skip
+
+    def spy_setter(fmu, names):
+        write = setter(fmu, names)
+
+        def spied(values):
+            if fmu.name == "controller":
+                events.append(("set", list(values)))
+            write(values)
+
+        return spied
+
+    def spy_step(fmu, t, h):
+        step(fmu, t, h)
+        observe(fmu)
+
+    def spy_exit(fmu):
+        exit_init(fmu)
+        events.clear() if fmu.name == "plant" else None  # the writes of initialization
+        observe(fmu)
+
+    monkeypatch.setattr(FmuInstance, "real_setter", spy_setter)
+    monkeypatch.setattr(FmuInstance, "step", spy_step)
+    monkeypatch.setattr(FmuInstance, "exit_initialization", spy_exit)
+    master = Master(
+        system,
+        parameter_set=scenario,
+        algorithm="jacobi",
+        step_size=H,
+        stop_time=STEPS * H,
+        extrapolation=extrapolation,
+        loop="python",
+    )  # fmt: skip  (the C loop sets its inputs in C)
+    result = master.run()
+    assert result.ok, result.error
+    return result, events, sources
+
+
+def _pairs(events: list[tuple]) -> list[tuple[list[float], dict, dict]]:
+    """Each controller input write with the plant's last outputs and derivatives before it."""
+    out, last = [], None
+    for event in events:
+        if event[0] == "y":
+            last = event[1:]
+        else:
+            assert last is not None
+            out.append((event[1], *last))
+    return out
+
+
+@pytest.mark.parametrize("scenario", ["observer", "difference"])
+def test_linear_sets_the_controller_inputs_to_y_plus_h_times_dy(monkeypatch, native_ssp, scenario):
+    result, events, sources = _spied_run(monkeypatch, native_ssp, "linear", scenario)
+    pairs = _pairs(events)
+    assert len(pairs) == STEPS
+    moved = 0
+    for k, (written, y, dy) in enumerate(pairs):
+        expected = [y[n] + H * dy[n] for n in sources]
+        assert written == expected, (k, written, expected)  # bit for bit
+        row = dict(zip(result.names, result.data[k], strict=True))
+        assert all(y[n] == row[f"plant.{n}"] for n in sources), k  # the outputs at t_k
+        for i in (1, 2, 3):  # independent of the derivative call: dq/dt is the output qd
+            assert written[sources.index(f"q{i}")] == row[f"plant.q{i}"] + H * row[f"plant.qd{i}"]
+        moved += sum(w != y[n] for w, n in zip(written, sources, strict=True))
+    assert moved > STEPS  # the extrapolation changes the inputs (the arm moves from k = 1)
+
+
+def test_none_sets_the_outputs_unchanged(monkeypatch, native_ssp):
+    _, events, sources = _spied_run(monkeypatch, native_ssp, "none")
+    pairs = _pairs(events)
+    assert len(pairs) == STEPS
+    for written, y, _dy in pairs:
+        assert written == [y[n] for n in sources]
+
+
+def test_refusals_name_the_problem(ssp_path, native_ssp):
+    native, python = read_ssp(native_ssp), read_ssp(ssp_path)
+    with pytest.raises(MasterError, match="needs the Jacobi algorithm"):
+        Master(native, algorithm="gauss-seidel", extrapolation="linear")
+    with pytest.raises(MasterError, match=r"PumaPlant.fmu: 0\).*maxOutputDerivativeOrder|"
+                       r"maxOutputDerivativeOrder >= 1: .*PumaPlant.fmu: 0"):  # fmt: skip
+        Master(python, algorithm="jacobi", extrapolation="linear")
+    with pytest.raises(MasterError, match="needs the Python loop"):
+        Master(native, algorithm="jacobi", extrapolation="linear", loop="c")
+    with pytest.raises(MasterError, match="extrapolation must be one of"):
+        Master(native, algorithm="jacobi", extrapolation="quadratic")
+    assert Master(native, algorithm="jacobi", extrapolation="linear").loop == "python"
+
+
+def test_cli_records_it_in_run_json_and_refuses_the_python_plant(native_ssp, ssp_path, tmp_path,
+                                                                 capsys):  # fmt: skip
+    out = tmp_path / "res"
+    argv = [
+        "run",
+        "--ssp",
+        str(native_ssp),
+        "--stop",
+        "0.1",
+        "--algorithm",
+        "jacobi",
+        "--extrapolation",
+        "linear",
+        "--out",
+        str(out),
+        "--no-figures",
+        "--no-progress",
+    ]
+    assert main(argv) == 0
+    (run,) = json.loads((out / "run.json").read_text())["runs"]
+    assert run["extrapolation"] == "linear" and run["algorithm"] == "jacobi"
+    capsys.readouterr()
+    bad = [
+        "run",
+        "--ssp",
+        str(ssp_path),
+        "--stop",
+        "0.1",
+        "--algorithm",
+        "jacobi",
+        "--extrapolation",
+        "linear",
+        "--out",
+        str(tmp_path / "bad"),
+        "--no-figures",
+    ]
+    assert main(bad) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "maxOutputDerivativeOrder" in err[0], err
+    assert not np.any([p.exists() for p in [tmp_path / "bad" / "run.json"]])

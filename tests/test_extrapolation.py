@@ -167,3 +167,49 @@ def test_cli_records_it_in_run_json_and_refuses_the_python_plant(native_ssp, ssp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "maxOutputDerivativeOrder" in err[0], err
     assert not np.any([p.exists() for p in [tmp_path / "bad" / "run.json"]])
+
+
+def test_fmi3_plant_extrapolates_like_fmi2(native_ssp, fmi3_dir):
+    """fmi3GetOutputDerivatives path: the FMI 3.0 system gives the FMI 2.0 system's rows."""
+    rows = []
+    for ssp in (native_ssp, fmi3_dir.parent / "PaperScenario-fmi3.ssp"):
+        r = Master(read_ssp(ssp), "observer", algorithm="jacobi", stop_time=0.25,
+                   extrapolation="linear").run()  # fmt: skip
+        assert r.ok, r.error
+        rows.append({n: r.data[:, k] for k, n in enumerate(r.names)})
+    plain = Master(read_ssp(native_ssp), "observer", algorithm="jacobi", stop_time=0.25).run()
+    for name in ("plant.q1", "plant.q3", "controller.tau1", "controller.tau3"):
+        np.testing.assert_array_equal(rows[0][name], rows[1][name], err_msg=name)
+        assert np.abs(rows[0][name] - plain.data[:, plain.names.index(name)]).max() > 1e-6
+
+
+@pytest.mark.parametrize("scenario", ["observer", "measured"])
+@pytest.mark.parametrize("extrapolation", ["none", "linear"])
+def test_the_linearised_loop_steps_like_the_master(native_ssp, extrapolation, scenario):
+    """apps/linearize.step ("jacobi" / "jacobi-linear", the plain Python models, derivatives by
+    a central difference) follows the native master's Jacobi run for 1 s: the same map the
+    critical rates of docs/stability.md section 4 come from ("measured": the extrapolated
+    velocity's slope, the acceleration, depends on the torque the plant held)."""
+    from controller_model.model import ControllerModel
+    from impedance_cosim.apps import linearize as lin
+    from impedance_cosim.cosim.loop import wiring
+    from plant_model.model import PlantModel
+
+    h, n = 1 / 800, 800  # 800 Hz: the true velocity extrapolated is stable from 663 Hz
+    master = Master(read_ssp(native_ssp), scenario, {"controller.sample_period": h}, "jacobi",
+                    h, n * h, extrapolation=extrapolation)  # fmt: skip
+    result = master.run()
+    assert result.ok, result.error
+    plant = PlantModel(dict(master.parameters["plant"]), 0.0, None)
+    p_out, (feed, tau_idx) = plant.outputs(), wiring()
+    controller = ControllerModel(dict(master.parameters["controller"]), 0.0,
+                                 tuple(p_out[j] for j in feed))  # fmt: skip
+    plant.tau_held = tuple(controller.outputs()[j] for j in tau_idx)
+    algorithm = "jacobi-linear" if extrapolation == "linear" else "jacobi"
+    q = []
+    for i in range(n):
+        p_out = lin.step(plant, controller, i * h, h, algorithm, p_out)
+        q.append(plant.q)
+    native = np.column_stack([result.data[1:, result.names.index(f"plant.q{i}_true")]
+                              for i in (1, 2, 3)])  # fmt: skip
+    assert np.abs(np.array(q) - native).max() < 1e-9

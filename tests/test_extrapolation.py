@@ -125,6 +125,11 @@ def test_refusals_name_the_problem(ssp_path, native_ssp):
     with pytest.raises(MasterError, match="extrapolation must be one of"):
         Master(native, algorithm="jacobi", extrapolation="quadratic")
     assert Master(native, algorithm="jacobi", extrapolation="linear").loop == "python"
+    quantized = Master(native, algorithm="jacobi", stop_time=0.01, extrapolation="linear",
+                       overrides={"plant.q_quant": 1e-4}).run()  # fmt: skip
+    assert quantized.status == "failed" and len(quantized.data) == 1  # row t_0 kept
+    assert "fmi2GetRealOutputDerivatives failed" in quantized.error
+    assert "q1 has no time derivative" in quantized.error
 
 
 def test_cli_records_it_in_run_json_and_refuses_the_python_plant(native_ssp, ssp_path, tmp_path,

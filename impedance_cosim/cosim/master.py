@@ -117,8 +117,9 @@ class Master:
             raise MasterError("step_times and zero_start_inputs need the Python loop")
         if zero_start_inputs and self.algorithm != "jacobi":
             raise MasterError("zero_start_inputs needs the Jacobi algorithm")
-        if extrapolation != "none" and loop == "c":
-            raise MasterError(f"extrapolation {extrapolation!r} needs the Python loop (not loop c)")
+        if extrapolation != "none" and (loop == "c" or zero_start_inputs):
+            raise MasterError(f"extrapolation {extrapolation!r} needs the Python loop (not loop c)"
+                              " and the initialized outputs as first inputs")  # fmt: skip
         self.extrapolation = extrapolation
         loop = "python" if step_times or zero_start_inputs or extrapolation != "none" else loop
         self.loop = loop
@@ -203,11 +204,11 @@ class Master:
                 comp, sep, rest = str(exc).partition(": ")
                 raise FmuError(f"{comp}: in initialization: {rest}" if sep else
                                f"in initialization: {exc}") from None  # fmt: skip
-            if self.extrapolation != "none":
-                extra.prepare(ordered)  # the sources' output derivatives at t_0
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
+            if self.extrapolation != "none":
+                extra.prepare(ordered)  # the sources' output derivatives at t_0
             error = self._check_row(names, data[0], t0)
             unsupported = fastloop.unsupported(ordered)
             if self.loop == "c" and unsupported:

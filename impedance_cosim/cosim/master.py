@@ -8,8 +8,8 @@
   * Gauss-Seidel: the components in order (default controller, then plant: the paper's
     sample-and-hold) each take their inputs from the latest outputs, then step;
   * Jacobi: all inputs are taken from the outputs at t_i, then all components step;
-    `extrapolation="linear"`: y(t_i) + h dy/dt(t_i) where the source gives dy/dt (extrapolation.py;
-    Python loop).
+    `extrapolation="linear"`: y(t_i) + h dy/dt(t_i) where the source gives dy/dt
+    (extrapolation.py).
 - Recording: one row at t_0 (after initialization) and one at each t_i+1 = the outputs after the
   step that ends there (as FMI defines them: a sampled output holds the last sample's value), every
   Real output of every component ("plant.x", "controller.tau1", ...), so every connection too.
@@ -117,11 +117,11 @@ class Master:
             raise MasterError("step_times and zero_start_inputs need the Python loop")
         if zero_start_inputs and self.algorithm != "jacobi":
             raise MasterError("zero_start_inputs needs the Jacobi algorithm")
-        if extrapolation != "none" and (loop == "c" or zero_start_inputs):
-            raise MasterError(f"extrapolation {extrapolation!r} needs the Python loop (not loop c)"
-                              " and the initialized outputs as first inputs")  # fmt: skip
+        if extrapolation != "none" and zero_start_inputs:
+            raise MasterError(f"extrapolation {extrapolation!r} needs the initialized outputs as"
+                              " first inputs (not zero_start_inputs)")  # fmt: skip
         self.extrapolation = extrapolation
-        loop = "python" if step_times or zero_start_inputs or extrapolation != "none" else loop
+        loop = "python" if step_times or zero_start_inputs else loop
         self.loop = loop
         self.realtime = realtime
         self.instances = instances  # an fmu_pool.InstancePool: reuse FMU instances across runs
@@ -220,7 +220,7 @@ class Master:
             if fast:
                 step = fastloop.stepper(fast, ordered, data, self.algorithm == "jacobi",
                                         self.start_time, self.step_size, self.divergence_limit,
-                                        self._check_row)  # fmt: skip
+                                        self._check_row, self.extrapolation != "none")  # fmt: skip
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
                 rt = self.realtime if isinstance(self.realtime, RealtimeOptions) else None

@@ -9,10 +9,11 @@ prints
 2. the critical sample rates (bisection to 1 Hz over 100-1000 Hz, 20 s runs, ideal sensors,
    the stability study's Bisection and sweep points) per velocity source, Jacobi with and
    without extrapolation;
-3. the same from the linearised loop (apps/linearize.py with extrapolate=True), free motion and
-   contact points, as docs/stability.md compares them for plain Jacobi.
+3. the same from the linearised loop (apps/linearize.py, "jacobi-linear"), free motion and
+   contact points, as docs/stability.md compares them for plain Jacobi;
+4. the cost: the master's stepping time per step (C loop, observer, 20 s, best of 5 runs).
 
-    python benchmarks/extrapolation.py [accuracy] [bisection] [linear]
+    python benchmarks/extrapolation.py [accuracy] [bisection] [linear] [speed]
 """
 
 from __future__ import annotations
@@ -120,8 +121,22 @@ def linear() -> None:
             print(f"| {velocity} | {extrapolation} | {shown[0]} | {shown[1]} | {tail} |")
 
 
+def speed() -> None:
+    """Part 4: stepping time per step, with and without extrapolation."""
+    system = read_ssp(SSP)
+    print("## cost: stepping time per step (C loop, observer, 8000 steps, best of 5)")
+    for algorithm, extrapolation in (("gauss-seidel", "none"), ("jacobi", "none"),
+                                     ("jacobi", "linear")):  # fmt: skip
+        best = min(
+            Master(system, "observer", algorithm=algorithm, loop="c",
+                   extrapolation=extrapolation).run().info["stepping_s"]
+            for _ in range(5)
+        )  # fmt: skip
+        print(f"{algorithm}, extrapolation {extrapolation}: {best / 8000 * 1e6:.2f} us per step")
+
+
 if __name__ == "__main__":
-    parts = sys.argv[1:] or ["accuracy", "bisection", "linear"]
+    parts = sys.argv[1:] or ["accuracy", "bisection", "linear", "speed"]
     for part in parts:
-        {"accuracy": accuracy, "bisection": bisection, "linear": linear}[part]()
+        {"accuracy": accuracy, "bisection": bisection, "linear": linear, "speed": speed}[part]()
         print()

@@ -2,6 +2,7 @@
 docs/figures.md shows and tests/test_docs_figures.py checks), and regenerating them.
 
     python benchmarks/docs_figures.py run          # Figs. 1-4 and fig4_jacobi.png (about 1 min)
+    python benchmarks/docs_figures.py mujoco       # Fig. 1 with MujocoPlant overlaid (~10 s)
     python benchmarks/docs_figures.py              # every docs file (stability ~3 min, the sweep
                                                    # study ~10 min on 2 cores)
 
@@ -19,7 +20,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-DOCS = Path(__file__).resolve().parent.parent / "docs"
+REPO = Path(__file__).resolve().parent.parent
+DOCS = REPO / "docs"
 
 
 @dataclass(frozen=True)
@@ -30,9 +32,21 @@ class Writer:
     group: str
     argv: tuple[str, ...]
     writes: str
+    script: str | None = None  # a benchmark script instead, told the file's path by --figure
 
     def command(self, out: str = "OUT") -> str:
+        if self.script:
+            return shlex.join(
+                ["python", self.script, *self.argv, "--figure", f"{out}/{self.writes}"]
+            )
         return shlex.join(["impedance-cosim", *self.argv, "--out", out])
+
+    def program(self, out: str) -> list[str]:
+        """The argv that runs it with this interpreter, writing into the folder out."""
+        if self.script:
+            return [sys.executable, str(REPO / self.script), *self.argv, "--figure",
+                    str(Path(out) / self.writes)]  # fmt: skip
+        return [sys.executable, "-m", "impedance_cosim", *self.argv, "--out", out]
 
 
 RUN = ("run", "--no-progress")
@@ -80,22 +94,24 @@ WRITERS: dict[str, Writer] = {
             "map_quantization.png",
         )
     },  # fmt: skip
+    "fig1_mujoco_overlay.png": Writer(
+        "mujoco", (), "fig1_mujoco_overlay.png", script="benchmarks/mujoco_compare.py"
+    ),
 }
 
 
 def regenerate(groups: set[str]) -> None:
     """Run each group's commands (once per command) and copy their files into docs/."""
-    commands: dict[tuple[str, ...], list[str]] = {}
+    commands: dict[tuple[str | None, tuple[str, ...]], list[str]] = {}
     for name, w in WRITERS.items():
         if w.group in groups:
-            commands.setdefault(w.argv, []).append(name)
-    for argv, names in commands.items():
+            commands.setdefault((w.script, w.argv), []).append(name)
+    for names in commands.values():
         with tempfile.TemporaryDirectory(prefix="impcosim_docs_") as tmp:
             print(f"$ {WRITERS[names[0]].command(tmp)}", flush=True)
-            done = subprocess.run([sys.executable, "-m", "impedance_cosim", *argv, "--out", tmp],
-                                  check=False)  # fmt: skip
+            done = subprocess.run(WRITERS[names[0]].program(tmp), check=False)
             if done.returncode not in (0, 3):  # 3: a run diverged (fig4_jacobi: the point)
-                raise SystemExit(f"exit status {done.returncode}: {shlex.join(argv)}")
+                raise SystemExit(f"exit status {done.returncode}: {WRITERS[names[0]].command()}")
             for name in names:
                 shutil.copyfile(Path(tmp) / WRITERS[name].writes, DOCS / name)
                 print(f"  docs/{name}")
@@ -105,5 +121,5 @@ if __name__ == "__main__":
     chosen = set(sys.argv[1:]) or {w.group for w in WRITERS.values()}
     unknown = chosen - {w.group for w in WRITERS.values()}
     if unknown:
-        raise SystemExit(f"unknown group(s) {sorted(unknown)}: run, stability, study")
+        raise SystemExit(f"unknown group(s) {sorted(unknown)}: run, stability, study, mujoco")
     regenerate(chosen)

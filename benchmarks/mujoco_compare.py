@@ -20,6 +20,7 @@ import numpy as np
 
 import impedance_cosim as ic
 from impedance_cosim.apps.analysis import at_samples, contact_phases
+from impedance_cosim.cosim.leave import exit_process
 from impedance_cosim.packaging.build import DEFAULT_OUT
 
 WALL_X, WALL_K = 0.65, 1.0e4  # the paper's wall (observer_plant.ssv)
@@ -189,6 +190,7 @@ def main() -> None:
     parser.add_argument("--figure", type=Path, default=None, help="draw Fig. 1 overlaid here")
     args = parser.parse_args()
     compare(args.ssp, args.fmu, args.stop, args.timestep, args.figure)
+    exit_process(0)  # as our commands leave: pythonfmu's exit abort (docs/limitations.md)
 
 
 if __name__ == "__main__":

@@ -55,6 +55,9 @@ def test_each_writer_writes_that_file():
     writes = {"run": set(CAPTIONS), "stability": {*TABLES.values(), *FIGURES.values()},
               "sweep": study}  # fmt: skip
     for name, w in WRITERS.items():
+        if w.script:  # told the file's path: the script must take --figure
+            assert "--figure" in (REPO / w.script).read_text(encoding="utf-8"), name
+            continue
         assert w.writes in writes[w.argv[0]], f"{name}: `{w.command()}` writes no {w.writes}"
 
 

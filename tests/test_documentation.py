@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
+from fmpy_cli import fmpy_cli
 
 import impedance_cosim
 from impedance_cosim.packaging.build import FMUS, REPO
@@ -224,8 +225,6 @@ def test_documented_fmpy_commands_run(fmus, tmp_path: Path):
     import re
     import shlex
     import shutil
-    import subprocess
-    import sys
 
     ran, expected = 0, 0
     for fmu in fmus:
@@ -245,8 +244,7 @@ def test_documented_fmpy_commands_run(fmus, tmp_path: Path):
             args = shlex.split(line)[1:] + ["--stop-time", "0.1"]
             if "--output-file" not in args:
                 args += ["--output-file", "out.csv"]
-            done = subprocess.run([sys.executable, "-m", "fmpy.cli", *args], cwd=work,
-                                  capture_output=True, text=True, timeout=120)  # fmt: skip
+            done = fmpy_cli(args, cwd=work, capture_output=True, text=True, timeout=120)
             assert done.returncode == 0, (fmu.name, line, done.stderr[-2000:])
             out = next(work.glob("*.csv"))
             assert len(out.read_text().splitlines()) > 10, (fmu.name, line)

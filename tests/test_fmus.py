@@ -13,6 +13,7 @@ import zipfile
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
+from fmpy_cli import fmpy_cli
 
 from impedance_cosim.cosim.fmu import FmuError, FmuInstance
 from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
@@ -57,8 +58,8 @@ def test_fmu_is_valid_and_documented(fmu_dir, name):
 def test_fmpy_simulate_from_a_shell(fmu_dir, tmp_path, name):
     """`fmpy simulate` runs each FMU's default experiment on its own."""
     out = tmp_path / "out.csv"
-    cmd = ["fmpy", "simulate", str(fmu_dir / name), "--output-interval", "0.0025"]
-    subprocess.run([*cmd, "--output-file", str(out)], check=True, timeout=300)
+    cmd = ["simulate", str(fmu_dir / name), "--output-interval", "0.0025"]
+    fmpy_cli([*cmd, "--output-file", str(out)], check=True, timeout=300)
     with open(out) as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 8001 and float(rows[-1]["time"]) == 20.0

@@ -18,6 +18,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from fmpy_cli import fmpy_cli
 
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.packaging.mujoco_mjcf import MUJOCO_MJCF_NAME, mujoco_mjcf
@@ -257,8 +258,8 @@ def test_default_experiment_runs_alone_as_pumaplants_reference(fmu_dir, tmp_path
     from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
 
     out = tmp_path / "out.csv"
-    subprocess.run(["fmpy", "simulate", str(fmu_dir / "MujocoPlant.fmu"), "--output-interval",
-                    "0.0025", "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
+    fmpy_cli(["simulate", str(fmu_dir / "MujocoPlant.fmu"), "--output-interval", "0.0025",
+              "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
     rows = read(out)
     ref = read_csv(next(p for p in REFERENCES if p.name == "PumaPlant_ref.csv"))
     assert len(rows["time"]) == 8001

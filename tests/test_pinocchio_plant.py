@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from fmpy_cli import fmpy_cli
 
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.packaging import robot_check
@@ -182,8 +183,8 @@ def test_default_experiment_matches_pumaplants_reference(fmu_dir, tmp_path):
     from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
 
     out = tmp_path / "out.csv"
-    subprocess.run(["fmpy", "simulate", str(fmu_dir / "PinocchioPlant.fmu"), "--output-interval",
-                    "0.0025", "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
+    fmpy_cli(["simulate", str(fmu_dir / "PinocchioPlant.fmu"), "--output-interval", "0.0025",
+              "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
     rows = read(out)
     ref = read_csv(next(p for p in REFERENCES if p.name == "PumaPlant_ref.csv"))
     assert len(rows["time"]) == 8001

@@ -9,6 +9,11 @@ PlantModel and ControllerModel, ideal encoders) maps x_k to x_k+1; its Jacobian,
 differences, is the linearised sampled-data loop at that operating point. Its spectral radius
 above 1 means the loop is locally unstable there.
 
+Algorithm "jacobi-linear": Jacobi with the master's input extrapolation (cosim/extrapolation.py):
+the controller samples y(t_k) + h dy/dt(t_k), the plant's output derivatives taken with the torque
+it held over the last sample (as the native plant reports them), so that torque joins the state
+(21 numbers); dy/dt by a central difference of the outputs along the plant's own state derivative.
+
 The trajectory is time-varying (the virtual ellipse moves): the Jacobian at a point is the frozen
 map of that sample, and the points used are one in free motion and one in settled contact.
 """
@@ -31,6 +36,7 @@ POINTS = {"free": 1.0, "contact": 5.5}
 WARMUP = 4  # samples of the loop at the analysed rate before the linearisation point
 PLANT_TOL = {"rtol": 1e-12, "atol": 1e-14}  # tight, so differences are not integrator noise
 H_GUESS = 1e-4  # s, the plant integrator's first step guess for every evaluation of the map
+RATE_EPS = 1e-7  # s, the central difference of the outputs along the state derivative
 
 
 def jacobian(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, rel: float = 1e-6) -> np.ndarray:
@@ -60,6 +66,39 @@ def dominant(a: np.ndarray) -> tuple[float, float | None]:
     return float(abs(z)), (2 * math.pi / angle if angle > 1e-9 else None)
 
 
+def output_rates(plant: PlantModel, tau: Sequence[float]) -> np.ndarray:
+    """d/dt of the plant's outputs (ideal sensors) at its state, torque tau held, contact mode
+    fixed: what fmi2GetRealOutputDerivatives of the native plant gives."""
+    saved = plant.q, plant.qd, plant.q_meas
+    x = np.array([*plant.q, *plant.qd])
+    f = np.array(plant._rhs(tuple(tau), plant.in_contact)(tuple(x)))
+
+    def at(s: float) -> np.ndarray:
+        y = x + s * f
+        plant.q, plant.qd = tuple(y[:3]), tuple(y[3:])
+        plant.q_meas = plant.q
+        return np.array(plant.outputs())
+
+    rates = (at(RATE_EPS) - at(-RATE_EPS)) / (2 * RATE_EPS)
+    plant.q, plant.qd, plant.q_meas = saved
+    return rates
+
+
+def step(plant: PlantModel, controller: ControllerModel, t: float, h: float, algorithm: str,
+         p_out: tuple) -> tuple:  # fmt: skip
+    """loop_step, and for "jacobi-linear" the extrapolated Jacobi step (module docstring); the
+    plant keeps the torque it held as `tau_held`."""
+    if algorithm != "jacobi-linear":
+        return loop_step(plant, controller, t, h, algorithm, p_out)
+    feed, tau_idx = wiring()
+    held = controller.outputs()
+    rates = output_rates(plant, plant.tau_held)
+    controller.do_step(t, h, tuple(p_out[j] + h * rates[j] for j in feed))
+    plant.tau_held = tuple(held[j] for j in tau_idx)
+    plant.do_step(t, h, plant.tau_held)
+    return plant.outputs()
+
+
 class LoopMap:
     """x_k -> x_k+1 of the closed loop at the controller's next sample k (module docstring)."""
 
@@ -71,7 +110,8 @@ class LoopMap:
 
     def state(self) -> np.ndarray:
         p, c = self.plant, self.controller
-        return np.array([*p.q, *p.qd, *c.yhat, *c.q_prev, *c.tau_prev, *c.f_prev])
+        held = p.tau_held if self.algorithm == "jacobi-linear" else ()
+        return np.array([*p.q, *p.qd, *c.yhat, *c.q_prev, *c.tau_prev, *c.f_prev, *held])
 
     def load(self, x: Sequence[float]) -> None:
         """Put the models in state x at sample k (contact mode and integrator guess fixed)."""
@@ -83,11 +123,12 @@ class LoopMap:
         c.yhat, c.q_prev = tuple(x[6:9]), tuple(x[9:12])
         c.tau_prev, c.f_prev = tuple(x[12:15]), tuple(x[15:18])
         c.out = (*x[12:15], *c.out[3:])  # the held torque is the latest sample's
+        p.tau_held = tuple(x[18:21]) if self.algorithm == "jacobi-linear" else None
 
     def __call__(self, x: Sequence[float]) -> np.ndarray:
         self.load(x)
         t = self.controller.start_time + self.k * self.h
-        loop_step(self.plant, self.controller, t, self.h, self.algorithm, self.plant.outputs())
+        step(self.plant, self.controller, t, self.h, self.algorithm, self.plant.outputs())
         return self.state()
 
 
@@ -116,8 +157,9 @@ def operating_point(
     yhat0 = {f"yhat0_{j + 1}": qd[j] for j in range(3)}
     params = {**controller_parameters, **yhat0, "sample_period": h}
     controller = ControllerModel(params, t0, tuple(p_out[j] for j in feed))
+    plant.tau_held = tuple(controller.outputs()[j] for j in wiring()[1])
     for k in range(WARMUP):
-        p_out = loop_step(plant, controller, t0 + k * h, h, algorithm, p_out)
+        p_out = step(plant, controller, t0 + k * h, h, algorithm, p_out)
     return LoopMap(plant, controller, algorithm)
 
 

@@ -119,6 +119,10 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
                    help="communication step [s] (1/400)")  # fmt: skip
     p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], default=None,
                    help="master algorithm (default gauss-seidel, controller first)")  # fmt: skip
+    p.add_argument("--extrapolation", choices=["none", "linear"], default="none",
+                   help="Jacobi only (default none): linear sets each input fed by an output"
+                        " with a time derivative to y + h dy/dt (native plant;"
+                        " docs/stability.md)")  # fmt: skip
     p.add_argument("--set", action="append", metavar="COMPONENT.VARIABLE=VALUE",
                    help="override a parameter, e.g. controller.K=80 (K1..K3) or "
                         "plant.q_noise=1e-4 (repeatable)")  # fmt: skip

@@ -111,6 +111,7 @@ def _master(
         fmu_files=getattr(args, "fmu_files", None),
         realtime=realtime_setting(args),
         overrides_origin="given with --set",
+        extrapolation=getattr(args, "extrapolation", "none"),
     )
 
 
@@ -229,7 +230,10 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
     if any(r.status == "failed" for r in asked):
         return 1
     if len(pair) == len(FIG4_SOURCES):
-        rows = [(analysis.condition_label(main.algorithm, overrides), *pair.values())]
+        label = analysis.condition_label(main.algorithm, overrides)
+        if getattr(args, "extrapolation", "none") != "none":
+            label += ", inputs extrapolated"
+        rows = [(label, *pair.values())]
         if args.command == "run" and main.algorithm != "jacobi" and "realtime" not in main.info:
             delayed = fig4_pair(system, lambda s: run(s, "jacobi", FIG4_COMPARISON), {})
             if len(delayed) == len(FIG4_SOURCES):

@@ -36,6 +36,10 @@ class Comp(ctypes.Structure):
         ("n_out", ctypes.c_int),
         ("out_vr", ctypes.POINTER(ctypes.c_uint)),
         ("out_col", ctypes.c_int),
+        ("get_deriv", ctypes.c_void_p),
+        ("n_rate", ctypes.c_int),
+        ("rate_vr", ctypes.POINTER(ctypes.c_uint)),
+        ("rate_col", ctypes.POINTER(ctypes.c_int)),
     ]
 
 
@@ -77,7 +81,7 @@ def load() -> ctypes.CDLL | None:
     lib.run_loop.argtypes = [
         ctypes.POINTER(Comp), ctypes.c_int, ctypes.c_int, ctypes.c_double, ctypes.c_double,
         ctypes.c_long, ctypes.c_long, ctypes.c_double, ctypes.c_void_p, ctypes.c_int,
-        ctypes.POINTER(LoopError),
+        ctypes.c_void_p, ctypes.POINTER(LoopError),
     ]  # fmt: skip
     return lib
 
@@ -85,8 +89,8 @@ def load() -> ctypes.CDLL | None:
 MAX_IO = 256  # inputs per component the compiled loop takes (loop.c)
 # The FMI functions the loop calls, per standard
 FUNCTIONS = {
-    False: ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"),
-    True: ("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep"),
+    False: ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep", "fmi2GetRealOutputDerivatives"),
+    True: ("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep", "fmi3GetOutputDerivatives"),
 }
 
 
@@ -111,15 +115,18 @@ def stepper(
     step_size: float,
     divergence_limit: float,
     check_row: Callable[[list[str], np.ndarray, float], Any],
+    extrapolate: bool = False,
 ) -> Callable[..., tuple[int, str | None]]:
     """The master's steps in the compiled loop, for its components (the master's slots, wired)
     writing into `data`: returns steps(ordered, data, names, first, count) -> (rows filled,
-    error or None), like the master's Python loop."""
+    error or None), like the master's Python loop. extrapolate: the Jacobi inputs y + h dy/dt,
+    from the slots' rates (extrapolation.prepare), kept up to date in C."""
     offsets, col = {}, 1
     for s in ordered:
         offsets[s.name] = col
         col += len(s.outputs)
     comps = (Comp * len(ordered))()
+    rates = np.zeros(col) if extrapolate else None  # per column, refreshed by the loop
     keep = []  # the ctypes arrays must outlive the loop
     for c, s in zip(comps, ordered, strict=True):
         in_vr = (ctypes.c_uint * max(1, len(s.inputs)))(*(s.fmu.vr(n) for n in s.inputs))
@@ -130,7 +137,15 @@ def stepper(
         keep += [in_vr, in_col, out_vr]
         functions = s.fmu.slave._functions
         fmi3 = is_fmi3(s.fmu.description)
-        set_name, get_name, step_name = FUNCTIONS[fmi3]
+        set_name, get_name, step_name, deriv_name = FUNCTIONS[fmi3]
+        if extrapolate and s.read_rates is not None:
+            index = s.rate_index
+            rate_vr = (ctypes.c_uint * len(index))(*(s.fmu.vr(s.outputs[k]) for k in index))
+            rate_col = (ctypes.c_int * len(index))(*(offsets[s.name] + k for k in index))
+            keep += [rate_vr, rate_col]
+            c.get_deriv = ctypes.cast(functions[deriv_name], ctypes.c_void_p).value
+            c.n_rate, c.rate_vr, c.rate_col = len(index), rate_vr, rate_col
+            rates[offsets[s.name] : offsets[s.name] + len(s.outputs)] = s.rates
         c.component = s.fmu.slave.component
         c.set_real = ctypes.cast(functions[set_name], ctypes.c_void_p).value
         c.get_real = ctypes.cast(functions[get_name], ctypes.c_void_p).value
@@ -144,13 +159,15 @@ def stepper(
         err = LoopError()
         done = lib.run_loop(comps, len(ordered), int(jacobi), start_time, step_size,
                             first, count, divergence_limit,
-                            data.ctypes.data, data.shape[1], ctypes.byref(err))  # fmt: skip
+                            data.ctypes.data, data.shape[1],
+                            None if rates is None else rates.ctypes.data,
+                            ctypes.byref(err))  # fmt: skip
         _ = keep
         if err.comp >= 0:
             s = ordered[err.comp]
             s.fmu.fatal |= err.status == 4
-            set_name, get_name, step_name = FUNCTIONS[is_fmi3(s.fmu.description)]
-            call = (set_name, step_name, get_name)[err.call]
+            set_name, get_name, step_name, deriv_name = FUNCTIONS[is_fmi3(s.fmu.description)]
+            call = (set_name, step_name, get_name, deriv_name)[err.call]
             t = start_time + (first + done) * step_size
             detail = s.fmu.error_detail()
             status = STATUS[err.status] if 0 <= err.status < len(STATUS) else err.status

@@ -7,7 +7,9 @@
 - Stepping, t_i = start + i * h exactly (no accumulated time):
   * Gauss-Seidel: the components in order (default controller, then plant: the paper's
     sample-and-hold) each take their inputs from the latest outputs, then step;
-  * Jacobi: all inputs are taken from the outputs at t_i, then all components step.
+  * Jacobi: all inputs are taken from the outputs at t_i, then all components step;
+    `extrapolation="linear"`: y(t_i) + h dy/dt(t_i) where the source gives dy/dt
+    (extrapolation.py).
 - Recording: one row at t_0 (after initialization) and one at each t_i+1 = the outputs after the
   step that ends there (as FMI defines them: a sampled output holds the last sample's value), every
   Real output of every component ("plant.x", "controller.tau1", ...), so every connection too.
@@ -36,6 +38,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from impedance_cosim.cosim import extrapolation as extra
 from impedance_cosim.cosim import fastloop, realtime
 from impedance_cosim.cosim.fmu import FmuError, FmuInstance
 from impedance_cosim.cosim.fmu3 import open_fmu
@@ -91,6 +94,7 @@ class Master:
         zero_start_inputs: bool = False,
         instances: Any = None,
         overrides_origin: str = "in overrides",
+        extrapolation: str = "none",
     ) -> None:
         self.system = system
         # Another engine's conventions, to compare with it (Python loop only; engines.py has
@@ -113,6 +117,10 @@ class Master:
             raise MasterError("step_times and zero_start_inputs need the Python loop")
         if zero_start_inputs and self.algorithm != "jacobi":
             raise MasterError("zero_start_inputs needs the Jacobi algorithm")
+        if extrapolation != "none" and zero_start_inputs:
+            raise MasterError(f"extrapolation {extrapolation!r} needs the initialized outputs as"
+                              " first inputs (not zero_start_inputs)")  # fmt: skip
+        self.extrapolation = extrapolation
         loop = "python" if step_times or zero_start_inputs else loop
         self.loop = loop
         self.realtime = realtime
@@ -142,6 +150,8 @@ class Master:
             overrides or {},
             overrides_origin,  # where a bad override came from, for its message
         )
+        extra.check(extrapolation, self.algorithm, system.connections, self.descriptions,
+                    self.fmu_files)  # fmt: skip
         columns = 1 + sum(len(real_outputs(md)) for md in self.descriptions.values())
         columns += len(RT_COLUMNS) if realtime else 0
         too_big = size_problem(int(round(steps)), columns, self.stop_time, self.step_size)
@@ -197,6 +207,8 @@ class Master:
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
+            if self.extrapolation != "none":
+                extra.prepare(ordered)  # the sources' output derivatives at t_0
             error = self._check_row(names, data[0], t0)
             unsupported = fastloop.unsupported(ordered)
             if self.loop == "c" and unsupported:
@@ -208,7 +220,7 @@ class Master:
             if fast:
                 step = fastloop.stepper(fast, ordered, data, self.algorithm == "jacobi",
                                         self.start_time, self.step_size, self.divergence_limit,
-                                        self._check_row)  # fmt: skip
+                                        self._check_row, self.extrapolation != "none")  # fmt: skip
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
                 rt = self.realtime if isinstance(self.realtime, RealtimeOptions) else None
@@ -293,11 +305,16 @@ class Master:
                 if jacobi:
                     zero = self.zero_start_inputs and i == 0
                     for s in ordered:
-                        s.write([0.0 if zero else ordered[j].values[k] for j, k in s.sources])
+                        if self.extrapolation != "none":
+                            s.write(extra.inputs(s, ordered, h_i))
+                        else:
+                            s.write([0.0 if zero else ordered[j].values[k] for j, k in s.sources])
                     for s in ordered:
                         s.fmu.step(t, h_i)
                     for s in ordered:
                         s.values = s.read()
+                    if self.extrapolation != "none":
+                        extra.refresh(ordered)
                 else:
                     for s in ordered:
                         s.write([ordered[j].values[k] for j, k in s.sources])

@@ -131,16 +131,21 @@ point's position and Jacobian computed by Pinocchio from the URDF it carries (pu
 resources/…/carried_files.py), its numbers set from the parameters (the motor inertias as
 <code>model.armature</code>, gravity along −y): a second, independent plant to swap in. It needs
 Pinocchio (<code>pip install pin==4.1.0</code>) and numpy in the Python that runs it; without
-them instantiation fails, saying so. The wall, sensors and integrator are PumaPlant's.</p>
+them instantiation fails, saying so. The wall, sensors and integrator are PumaPlant's.
+Under <code>fmpy simulate</code> the process usually aborts at its exit (glibc: "corrupted
+double-linked list") after the result file is complete: pythonfmu 0.7's exit-time defect,
+which Pinocchio's libraries make likely; hosts that leave with <code>os._exit</code> after their
+clean-up (impedance-cosim swap) are not affected.</p>
 """
 
 MUJOCO = """
 <p><b>MujocoPlant</b> has PumaPlant's interface, simulated by MuJoCo from the MJCF it carries
 (puma3_mujoco.xml, in resources/…/carried_files.py): RK4 with ceil(h / <code>timestep</code>)
-equal steps per communication step, the wall as MuJoCo contact whose direct
-<code>solref</code> (−wall_k·Ā, −wall_d·Ā; Ā MuJoCo's approximate inverse mass of the hand)
-makes its force PumaPlant's wall law to about 1e-4, the wrist force/torque from MuJoCo's force
-and torque sensors at site <code>wrist</code>. It needs MuJoCo (<code>pip install
+equal steps per communication step, the wall as MuJoCo contact whose direct <code>solref</code>
+(−(1−i)·wall_k·Ā, −(1−i)·wall_d·Ā; i = 1e-4 the contact's fixed impedance, Ā MuJoCo's
+approximate inverse mass of the hand) makes its force PumaPlant's wall law plus MuJoCo's small
+acceleration term (within 2.1 mN in the paper scenario), the wrist force/torque from MuJoCo's
+force and torque sensors at site <code>wrist</code>. It needs MuJoCo (<code>pip install
 mujoco==4.0.0</code>) and numpy in the Python that runs it; without them instantiation fails,
 saying so. The arm and wall below are its numbers; PumaPlant's integrator parameters are not
 parameters here.</p>

@@ -6,6 +6,11 @@
  * Rows: data is (n_steps + 1) x n_cols, column 0 the time, then every component's outputs in
  * order (component k's outputs at columns out_col .. out_col + n_out - 1). Row `first` must be
  * filled by the caller; the loop fills rows first+1 .. first+n_steps.
+ *
+ * Input extrapolation (Jacobi only; impedance_cosim/cosim/extrapolation.py): with `rates` not
+ * NULL (one per column, the time derivatives of the outputs at the row before the step), each
+ * input is row[col] + h * rates[col]; after each step the components with n_rate > 0 refresh
+ * their columns of `rates` (fmi2GetRealOutputDerivatives / fmi3GetOutputDerivatives, order 1).
  */
 #include <math.h>
 #include <stdbool.h>
@@ -21,6 +26,8 @@ typedef int (*do_step_t)(void *, double, double, int);
 typedef int (*set_float64_t)(void *, const unsigned *, size_t, const double *, size_t);
 typedef int (*get_float64_t)(void *, const unsigned *, size_t, double *, size_t);
 typedef int (*do_step3_t)(void *, double, double, bool, bool *, bool *, bool *, double *);
+typedef int (*get_deriv_t)(void *, const unsigned *, size_t, const int *, double *);
+typedef int (*get_deriv3_t)(void *, const unsigned *, size_t, const int *, double *, size_t);
 
 #define MAX_IO 256
 
@@ -37,6 +44,10 @@ typedef union {
     do_step_t fmi2;
     do_step3_t fmi3;
 } StepFn;
+typedef union {
+    get_deriv_t fmi2;
+    get_deriv3_t fmi3;
+} DerivFn;
 
 typedef struct {
     void *component;
@@ -50,16 +61,20 @@ typedef struct {
     int n_out;
     const unsigned *out_vr;
     int out_col;
+    DerivFn get_deriv;    /* with n_rate > 0: the outputs' time derivatives */
+    int n_rate;
+    const unsigned *rate_vr;
+    const int *rate_col; /* column of each derivative in rates */
 } Comp;
 
 typedef struct {
     int comp;   /* component that failed, or -1 */
     int status; /* its FMI status */
-    int call;   /* 0 set, 1 step, 2 get */
+    int call;   /* 0 set, 1 step, 2 get, 3 get derivatives */
     int column; /* diverged column, or -1 */
 } LoopError;
 
-static int feed(const Comp *c, const double *row)
+static int feed(const Comp *c, const double *row, const double *rates, double h)
 {
     double in[MAX_IO];
     const size_t n = (size_t)c->n_in;
@@ -67,7 +82,8 @@ static int feed(const Comp *c, const double *row)
         return 0;
     }
     for (size_t k = 0; k < n; k++) {
-        in[k] = row[c->in_col[k]];
+        const int col = c->in_col[k];
+        in[k] = rates ? row[col] + h * rates[col] : row[col];
     }
     if (c->fmi3) {
         return c->set_real.fmi3(c->component, c->in_vr, n, in, n);
@@ -94,9 +110,26 @@ static int collect(const Comp *c, double *row)
     return c->get_real.fmi2(c->component, c->out_vr, n, row + c->out_col);
 }
 
+static int derivatives(const Comp *c, double *rates)
+{
+    int ones[MAX_IO];
+    double d[MAX_IO];
+    const size_t n = (size_t)c->n_rate;
+    for (size_t k = 0; k < n; k++) {
+        ones[k] = 1; /* first derivatives */
+    }
+    int s = c->fmi3 ? c->get_deriv.fmi3(c->component, c->rate_vr, n, ones, d, n)
+                    : c->get_deriv.fmi2(c->component, c->rate_vr, n, ones, d);
+    for (size_t k = 0; k < n && s <= 1; k++) {
+        rates[c->rate_col[k]] = d[k];
+    }
+    return s;
+}
+
 /* Returns the number of rows filled after `first` (n_steps when all went well). */
 long run_loop(const Comp *comps, int n_comps, int jacobi, double t0, double h, long first,
-              long n_steps, double limit, double *data, int n_cols, LoopError *err)
+              long n_steps, double limit, double *data, int n_cols, double *rates,
+              LoopError *err)
 {
     err->comp = -1;
     err->column = -1;
@@ -108,7 +141,7 @@ long run_loop(const Comp *comps, int n_comps, int jacobi, double t0, double h, l
         cur[0] = t0 + (double)(i + 1) * h;
         for (int k = 0; k < n_comps; k++) {
             const Comp *c = &comps[k];
-            int s = feed(c, jacobi ? prev : cur);
+            int s = feed(c, jacobi ? prev : cur, jacobi ? rates : NULL, h);
             if (s > 1) {
                 err->comp = k, err->status = s, err->call = 0;
                 return i - first;
@@ -140,6 +173,11 @@ long run_loop(const Comp *comps, int n_comps, int jacobi, double t0, double h, l
                 int s = collect(c, cur);
                 if (s > 1) {
                     err->comp = k, err->status = s, err->call = 2;
+                    return i - first;
+                }
+                s = rates && c->n_rate > 0 ? derivatives(c, rates) : 0;
+                if (s > 1) {
+                    err->comp = k, err->status = s, err->call = 3;
                     return i - first;
                 }
             }

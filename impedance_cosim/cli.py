@@ -94,6 +94,12 @@ def add_run(sub) -> None:
         action="store_true",
         help="list the names --set accepts, with the scenario's values, and exit",
     )
+    p.add_argument(
+        "--event-exact",
+        action="store_true",
+        help="step each FMI 3.0 FMU with event mode (the plant) to its events inside the"
+        " communication steps (contact switches, handled in Event Mode); the grid stays",
+    )
     p.set_defaults(func=run_cmd.cmd_run)
 
 

@@ -96,10 +96,12 @@ def _master(
     args: argparse.Namespace, system, overrides: dict, scenario: str | None, algorithm: str | None
 ):
     """The master of one run of the command (MasterError for anything it refuses)."""
+    from impedance_cosim.cosim.events import EventExactMaster
     from impedance_cosim.cosim.master import Master
     from impedance_cosim.cosim.realtime import realtime_setting
 
-    return Master(
+    cls = EventExactMaster if getattr(args, "event_exact", False) else Master
+    return cls(
         system,
         parameter_set=scenario,
         overrides=overrides,
@@ -208,6 +210,10 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
 
         values["realtime"] = main.info["realtime"]
         print(format_realtime(main.info["realtime"]))
+    if "events" in main.info:  # --event-exact: the switch times inside the steps
+        values["events"] = main.info["events"]
+        for name, times in main.info["events"].items():
+            print(f"{name} events (event-exact): " + ", ".join(f"{t:.9f} s" for t in times))
     written.append(out / f"{main.parameter_set}_summary.json")
     with atomic_write(written[-1]) as f:
         f.write(json.dumps(values, indent=2) + "\n")

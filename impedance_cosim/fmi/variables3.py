@@ -69,10 +69,11 @@ def model_description3(
     early_return: bool = False,
     naming: str = "flat",
 ) -> bytes:
-    """Complete FMI 3.0 modelDescription.xml: Co-Simulation (without event mode) and, with
+    """Complete FMI 3.0 modelDescription.xml: Co-Simulation and, with
     model_exchange, Model Exchange; with clock, Scheduled Execution instead of both, the model's
     inputs and outputs then clocked by it. output_dependencies as in the FMI 2.0 writer;
-    early_return: fmi3DoStep may return early (at the plant's contact) if the importer allows;
+    early_return: fmi3DoStep may return early at the plant's contact, calls the intermediate
+    update there and signals the event (event mode in Co-Simulation) if the importer asks;
     naming: the variableNamingConvention, as in the FMI 2.0 writer."""
     table = full_table(variables, model_exchange)
     ext = extras(len(table), model_exchange, clock)
@@ -115,10 +116,11 @@ def model_description3(
             {
                 **common,
                 "canHandleVariableCommunicationStepSize": "true",
-                "hasEventMode": "false",
+                # the plant's contact switch: early return, intermediate update, event mode
+                "hasEventMode": xml_value(early_return),
                 "mightReturnEarlyFromDoStep": xml_value(early_return),
-                "providesIntermediateUpdate": "false",
-                "canReturnEarlyAfterIntermediateUpdate": "false",
+                "providesIntermediateUpdate": xml_value(early_return),
+                "canReturnEarlyAfterIntermediateUpdate": xml_value(early_return),
                 **orders,
             },
         )
@@ -155,6 +157,8 @@ def model_description3(
             attrs.update(clocked, variability="discrete")
         if v.causality in ("output", "local"):
             attrs["initial"] = "calculated"
+        if early_return and v.causality == "output":  # readable in the intermediate update
+            attrs["intermediateUpdate"] = "true"
         if v.derivative:
             attrs["derivative"] = str(vr_of[v.derivative])
         enumeration = getattr(v, "enumeration", None)

@@ -40,7 +40,14 @@ from impedance_cosim.packaging.pyfmu_guard import guard_binaries
 from impedance_cosim.version import __version__
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
-FMI3_GLUE = ("fmi3_glue.c", "fmi3_events.c", "fmi3_stubs.c", "fmi3_wrapper.h", "fmi2_hidden.h")
+FMI3_GLUE = (
+    "fmi3_glue.c",
+    "fmi3_events.c",
+    "fmi3_cosim.c",  # fmi3DoStep: early return, intermediate update, event mode in CS
+    "fmi3_stubs.c",
+    "fmi3_wrapper.h",
+    "fmi2_hidden.h",
+)
 # compiled into the FMI 3 binary by inclusion from fmi3_glue.c, not on their own
 INCLUDED = ("fmi2_glue.c", "fmi2_me.c")
 SAMPLE_CLOCK = SampleClock(

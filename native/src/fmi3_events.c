@@ -161,6 +161,12 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     fmi2EventInfo ev;
     fmi2Status s;
     WRAP("fmi3UpdateDiscreteStates");
+    if (w->kind == K_CS) {
+        return cs_update_discrete_states(w, discreteStatesNeedUpdate, terminateSimulation,
+                                         nominalsOfContinuousStatesChanged,
+                                         valuesOfContinuousStatesChanged, nextEventTimeDefined,
+                                         nextEventTime);
+    }
     if (w->kind != K_ME) {
         return FAIL(w, "fmi3UpdateDiscreteStates: this FMU has event mode under Model "
                        "Exchange only");

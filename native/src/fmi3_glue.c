@@ -9,8 +9,9 @@
  * fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra results,
  * and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an event of
  * the model's Model Exchange side at that time: the samples due are taken, outputs updated).
- * Co-Simulation is without event mode (hasEventMode=false): the model samples inside doStep as
- * under FMI 2.0, so a host without clock support runs it unchanged.
+ * Co-Simulation (fmi3_cosim.c) samples inside doStep as under FMI 2.0, so a host without clock
+ * support runs it unchanged; a model with discrete-state switches (the plant) offers early return,
+ * the intermediate update and event mode at each switch.
  */
 #include <math.h>
 #include <stddef.h>
@@ -185,6 +186,25 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                        instanceEnvironment, logMessage);
 }
 
+/* NULL if the importer's requiredIntermediateVariables are all outputs of a model with
+ * intermediate update (the only variables with intermediateUpdate="true"), else why not. */
+static const char *required_outputs(const fmi3ValueReference vr[], size_t n)
+{
+    if (n > 0 && !HAS_EARLY_RETURN) {
+        return MODEL_IDENTIFIER_STR " provides no intermediate update";
+    }
+    if (n > 0 && !vr) {
+        return "fmi3InstantiateCoSimulation: requiredIntermediateVariables is NULL";
+    }
+    for (size_t k = 0; k < n; k++) {
+        if (vr[k] >= N_VARS || VARS[vr[k]].causality != C_OUTPUT) {
+            return "fmi3InstantiateCoSimulation: a required intermediate variable is not an "
+                   "output (only outputs have intermediateUpdate=\"true\")";
+        }
+    }
+    return NULL;
+}
+
 fmi3Instance fmi3InstantiateCoSimulation(
     fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
     fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
@@ -193,20 +213,25 @@ fmi3Instance fmi3InstantiateCoSimulation(
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
 {
     Wrapper *w;
-    (void)resourcePath, (void)requiredIntermediateVariables, (void)intermediateUpdate;
-    if (eventModeUsed || nRequiredIntermediateVariables > 0) {
+    const char *refused = required_outputs(requiredIntermediateVariables,
+                                           nRequiredIntermediateVariables);
+    (void)resourcePath;
+    if (!HAS_EARLY_RETURN && eventModeUsed) {
+        refused = MODEL_IDENTIFIER_STR " has no event mode in co-simulation (hasEventMode=false)";
+    }
+    if (refused) {
         if (logMessage) {
-            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                       eventModeUsed ? MODEL_IDENTIFIER_STR " has no event mode in co-simulation "
-                                                            "(hasEventMode=false)"
-                                     : MODEL_IDENTIFIER_STR " provides no intermediate update");
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError", refused);
         }
         return NULL;
     }
     w = instantiate(K_CS, instanceName, instantiationToken, visible, loggingOn,
                     instanceEnvironment, logMessage);
-    if (w) {
-        w->early_return = HAS_EARLY_RETURN && earlyReturnAllowed;
+    if (w) { /* the plant stops its step at each switch for early return or the callback */
+        w->early_allowed = HAS_EARLY_RETURN && earlyReturnAllowed;
+        w->event_mode_used = eventModeUsed != fmi3False;
+        w->update = HAS_EARLY_RETURN ? intermediateUpdate : NULL;
+        w->early_return = w->early_allowed || w->update != NULL;
     }
     return w;
 }
@@ -261,13 +286,21 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
+    fmi3Status s;
     WRAP("fmi3ExitInitializationMode");
-    return status3(fmi2ExitInitializationMode(w->inner));
+    s = status3(fmi2ExitInitializationMode(w->inner));
+    if (s <= fmi3Warning && w->kind == K_CS && w->event_mode_used) {
+        w->cs_event_mode = 1; /* co-simulation with eventModeUsed: into Event Mode */
+    }
+    return s;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
     WRAP("fmi3EnterEventMode");
+    if (w->kind == K_CS) {
+        return cs_enter_event_mode(w);
+    }
     if (w->kind != K_ME) {
         return FAIL(w, "fmi3EnterEventMode: this FMU has event mode under Model Exchange only");
     }
@@ -283,6 +316,7 @@ fmi3Status fmi3Terminate(fmi3Instance instance)
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     WRAP("fmi3Reset");
+    w->cs_event_mode = 0;
     return status3(fmi2Reset(w->inner));
 }
 /* --- getters and setters ---------------------------------------------------------------------- */
@@ -572,41 +606,4 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
     return status3(fmi2DeSerializeFMUstate(w->inner, (const fmi2Byte *)serializedState, size,
                                       FMUState));
 }
-/* --- Co-Simulation ---------------------------------------------------------------------------- */
-
-fmi3Status fmi3EnterStepMode(fmi3Instance instance)
-{
-    WRAP("fmi3EnterStepMode");
-    return FAIL(w, "fmi3EnterStepMode: this FMU has no event mode in co-simulation");
-}
-
-fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
-                      fmi3Float64 communicationStepSize,
-                      fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                      fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
-                      fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
-{
-    fmi2Status s;
-    WRAP("fmi3DoStep");
-    if (w->kind != K_CS) {
-        return FAIL(w, "fmi3DoStep: this instance is not for co-simulation");
-    }
-    if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime) {
-        return FAIL(w, "fmi3DoStep: NULL output argument");
-    }
-    w->reached = currentCommunicationPoint + communicationStepSize;
-    s = fmi2DoStep(w->inner, currentCommunicationPoint, communicationStepSize,
-                   noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
-    *eventHandlingNeeded = fmi3False;
-    *terminateSimulation = fmi3False;
-    *earlyReturn = fmi3False;
-    if (s == fmi2OK && w->reached < currentCommunicationPoint + communicationStepSize) {
-        /* returned early at a discrete-state switch (the plant's wall contact) */
-        w->inner->s.last_time = w->reached;
-        *earlyReturn = fmi3True;
-        log_message(w->inner, fmi2OK, "logAll", "fmi3DoStep returns early at t=%.17g",
-                    w->reached);
-    }
-    *lastSuccessfulTime = w->inner->s.last_time;
-    return status3(s);
-}
+/* --- Co-Simulation: fmi3DoStep, fmi3EnterStepMode in fmi3_cosim.c ---------------------------- */

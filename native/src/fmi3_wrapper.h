@@ -22,8 +22,13 @@ typedef struct {
     Kind kind;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
-    int early_return; /* co-simulation: the importer allows early return, the model offers it */
+    int early_return; /* co-simulation: the model step stops at each switch (model_step_early) */
     double reached;   /* where the last model step stopped */
+    int early_allowed;  /* the importer's earlyReturnAllowed */
+    int event_mode_used; /* the importer's eventModeUsed */
+    int cs_event_mode;   /* co-simulation, eventModeUsed: in Event Mode (else Step Mode) */
+    int in_update;       /* inside the importer's intermediate update callback */
+    fmi3IntermediateUpdateCallback update; /* the importer's, or NULL */
 } Wrapper;
 
 /* An fmi2Status as fmi3Status (the same numbers; fmi2Pending, never returned, as fmi3Error). */
@@ -34,10 +39,22 @@ Wrapper *wrapper_of(fmi3Instance instance, const char *function);
 
 /* First line of every entry point: w, or return fmi3Error. */
 #define WRAP(function)                                                                         \
-    Wrapper *w = wrapper_of(instance, function);                                                     \
-    if (!w) {                                                                                  \
+    Wrapper *w = wrapper_of(instance, function);                                               \
+    if (!w || !allowed_in_update(w, function)) {                                               \
         return fmi3Error;                                                                      \
     }
+
+/* 1 unless w is inside the intermediate update callback and function is not a getter of
+ * variable values (the only calls the standard allows there; logged). */
+int allowed_in_update(Wrapper *w, const char *function);
+/* Co-Simulation Event Mode (fmi3_cosim.c): fmi3EnterEventMode, fmi3UpdateDiscreteStates. */
+fmi3Status cs_enter_event_mode(Wrapper *w);
+fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeedUpdate,
+                                     fmi3Boolean *terminateSimulation,
+                                     fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                     fmi3Boolean *valuesOfContinuousStatesChanged,
+                                     fmi3Boolean *nextEventTimeDefined,
+                                     fmi3Float64 *nextEventTime);
 
 #define FAIL(w, ...) (log_message((w)->inner, fmi2Error, "logStatusError", __VA_ARGS__), fmi3Error)
 

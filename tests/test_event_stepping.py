@@ -67,3 +67,15 @@ def test_run_cli_event_exact_writes_the_fixed_step_rows(fmu_dir, fmi3_dir, tmp_p
     assert csvs[0] == csvs[1] and len(csvs[0]) > 1000
     (switch,) = summary["events"]["plant"]  # the contact closes once before 4 s
     assert 3.8 < switch < 3.9 and f"plant events (event-exact): {switch:.9f} s" in done.stdout
+
+
+def test_run_cli_event_exact_without_an_event_mode_fmu_is_refused(native_ssp, tmp_path):
+    """`run --event-exact` on FMI 2.0 FMUs (no event mode) refuses in one line, exit 2, instead
+    of a run that silently steps as usual."""
+    cmd = [sys.executable, "-m", "impedance_cosim.cli", "run", "--ssp", str(native_ssp),
+           "--stop", "0.1", "--no-figures", "--no-progress", "--out", str(tmp_path / "out"),
+           "--event-exact"]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "needs an FMI 3.0 co-simulation FMU with event mode" in lines[0]

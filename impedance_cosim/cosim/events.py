@@ -20,6 +20,7 @@ from impedance_cosim.cosim.fmu import STATUS, FmuError, FmuInstance
 from impedance_cosim.cosim.fmu3 import FmuInstance3, open_fmu
 from impedance_cosim.cosim.master import Master
 from impedance_cosim.cosim.results import RunResult
+from impedance_cosim.cosim.run_setup import MasterError
 
 MAX_EVENTS_PER_STEP = 100  # a hang guard: contact chattering inside one communication step
 
@@ -110,8 +111,16 @@ class EventExactMaster(Master):
     event times."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
+        for taken in ("loop", "instances"):
+            if kwargs.get(taken) not in (None, "auto", "python"):
+                got = kwargs[taken]
+                raise MasterError(f"event-exact stepping sets {taken} itself (got {got!r})")
         kwargs.update(loop="python", instances=_Opener())
         super().__init__(*args, **kwargs)
+        if not any(has_event_mode(md) for md in self.descriptions.values()):
+            raise MasterError("event-exact stepping needs an FMI 3.0 co-simulation FMU with event"
+                              " mode (hasEventMode), and no component has one: use the FMI 3.0"
+                              " archive (fmus/PaperScenario-fmi3.ssp)")  # fmt: skip
         self.events: dict[str, list[float]] = {}
 
     def run(self, *args: Any, **kwargs: Any) -> RunResult:

@@ -97,12 +97,14 @@ FUNCTIONS = {
 def unsupported(ordered: list[Any]) -> str | None:
     """Why the compiled loop cannot step these components (None: it can): it calls FMI 2.0 and
     FMI 3.0 co-simulation FMUs, not FMI 3.0 Scheduled Execution (clocks), with at most MAX_IO
-    inputs each."""
+    inputs and extrapolated outputs each."""
     for s in ordered:
         if is_fmi3(s.fmu.description) and s.fmu.description.coSimulation is None:
             return f"{s.name} is an FMI 3.0 Scheduled Execution FMU (clocks)"
         if len(s.inputs) > MAX_IO:
             return f"{s.name} has {len(s.inputs)} connected inputs (at most {MAX_IO})"
+        if len(getattr(s, "rate_index", ())) > MAX_IO:  # outputs extrapolated from
+            return f"{s.name} has {len(s.rate_index)} extrapolated outputs (at most {MAX_IO})"
     return None
 
 

@@ -299,13 +299,14 @@ class Master:
         """Steps first .. first + count - 1 in Python; returns (rows filled, error or None)."""
         h, t0 = self.step_size, self.start_time
         jacobi = self.algorithm == "jacobi"
+        extrapolate = self.extrapolation != "none"
         for i in range(first, first + count):
             t, h_i = self.step_times(i) if self.step_times else (t0 + i * h, h)
             try:
                 if jacobi:
                     zero = self.zero_start_inputs and i == 0
                     for s in ordered:
-                        if self.extrapolation != "none":
+                        if extrapolate:
                             s.write(extra.inputs(s, ordered, h_i))
                         else:
                             s.write([0.0 if zero else ordered[j].values[k] for j, k in s.sources])
@@ -313,7 +314,7 @@ class Master:
                         s.fmu.step(t, h_i)
                     for s in ordered:
                         s.values = s.read()
-                    if self.extrapolation != "none":
+                    if extrapolate:
                         extra.refresh(ordered)
                 else:
                     for s in ordered:

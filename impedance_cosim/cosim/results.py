@@ -129,10 +129,11 @@ class Feed:
 
 def format_rows(data: np.ndarray) -> str:
     """Rows as CSV lines, each value exactly Python's repr (the shortest text that reads back to
-    the same double). orjson writes the same shortest digits ~20x faster, spelled as repr
-    spells them except for 1e-9 <= |x| < 1e-4 ("0.000012" for "1.2e-05", "1e-7" for "1e-07"):
-    those values are written with repr into the places orjson left for them. Non-finite
-    values (orjson: null) and anything not a 2-D float64 array take the plain repr path."""
+    the same double). orjson writes the same shortest digits faster (docs/performance.md),
+    spelled as repr spells them except for 1e-9 <= |x| < 1e-4 ("0.000012" for "1.2e-05", "1e-7"
+    for "1e-07"): those values are written with repr into the places orjson left for them.
+    Non-finite values (orjson: null) and anything not a 2-D float64 array take the plain repr
+    path."""
     data = np.asarray(data)
     if data.ndim != 2 or data.dtype != np.float64 or not len(data) or not np.isfinite(data).all():
         return _repr_rows(data)

@@ -141,11 +141,16 @@ int model_step(Data *d, double t, double h, char *msg)
     }
     copy_parameters(d, &d->m, 1); /* tunable parameters set since the last step */
     k = (int64_t)floor((t - d->start_time) / ts + TIME_TOL) + 1; /* next sample after t */
+    /* refused before any work where it surely spans too many (the loop's count, within 1) */
+    if (floor((end - tol - d->start_time) / ts) - (double)k + 2.0 > (double)n_max + 2.0) {
+        return fail(msg, "a step of %g s spans more than %d sample periods (parameter "
+                         "controller.max_samples_per_step): take a smaller step", h, n_max);
+    }
     for (;;) {
         const double next = d->start_time + (double)k * ts;
         const int last = !(next < end - tol);
         const double hc = last ? (tc == t ? h : end - tc) : next - tc;
-        if (++n > n_max + 1) {
+        if ((int64_t)++n > (int64_t)n_max + 1) {
             return fail(msg, "a step of %g s spans more than %d sample periods (parameter "
                              "controller.max_samples_per_step): take a smaller step", h, n_max);
         }

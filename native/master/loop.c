@@ -115,6 +115,9 @@ static int derivatives(const Comp *c, double *rates)
     int ones[MAX_IO];
     double d[MAX_IO];
     const size_t n = (size_t)c->n_rate;
+    if (n > MAX_IO) {
+        return 3; /* fmi2Error: more than the loop takes (fastloop.unsupported refuses it first) */
+    }
     for (size_t k = 0; k < n; k++) {
         ones[k] = 1; /* first derivatives */
     }

@@ -259,8 +259,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(
 void fmi3FreeInstance(fmi3Instance instance)
 {
     Wrapper *w = wrapper_of(instance, "fmi3FreeInstance");
-    if (!w) {
-        return;
+    if (!w || !allowed_in_update(w, "fmi3FreeInstance")) {
+        return; /* refused inside the intermediate update: fmi3DoStep goes on with w */
     }
     fmi2FreeInstance(w->inner);
     *(volatile unsigned *)&w->magic = 0; /* volatile: the store must survive free() */

@@ -30,8 +30,9 @@ int model_step(Data *d, double t, double h, char *msg);
 
 #include "fmi3_wrapper.h" /* Wrapper, WRAP, FAIL */
 #if HAS_EARLY_RETURN
-/* model.c: model_step that stops at the first discrete-state switch inside the step */
-int model_step_early(Data *d, double t, double h, double *reached, char *msg);
+/* model.c: model_step that stops at the first discrete-state switch inside the step, its work
+ * added to *work (the fmi3DoStep's so far: the bounds hold for that whole) */
+int model_step_early(Data *d, double t, double h, double *reached, StepWork *work, char *msg);
 #endif
 
 #ifndef MODEL_EXCHANGE
@@ -48,7 +49,7 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
     Wrapper *w = (Wrapper *)inst->cb.componentEnvironment;
 #if HAS_EARLY_RETURN
     if (w->early_return && w->inner == inst) {
-        return model_step_early(d, t, h, &w->reached, msg);
+        return model_step_early(d, t, h, &w->reached, &w->work, msg);
     }
 #endif
     w->reached = t + h;

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C c
 
 DT = 1 / 400
 WALL = 0.65
-ERROR = 3  # fmi3Error
+DISCARD, ERROR = 2, 3  # fmi3Discard, fmi3Error
 STATE = ["q1_true", "q2_true", "q3_true", "qd1", "qd2", "qd3", "contact_force", "x", "q1"]
 
 
@@ -197,3 +197,37 @@ def test_event_mode_without_early_return_steps_as_today(fmi3_dir, torques):
         plant.set_torques(tau)
         assert plant.fmu.doStep(i * DT, DT) == (False, False, False, i * DT + DT)
     assert plant.get(STATE) == _plain_run(fmi3_dir, torques)
+
+
+@pytest.mark.parametrize(
+    "max_rhs, refusal",
+    [(None, "more than 200000 evaluations of the dynamics"), (10**8, "more than 1000 switches")],
+)
+def test_the_work_bound_holds_for_the_whole_step_across_the_callbacks(fmi3_dir, max_rhs, refusal):
+    """Issue 34: with the callback, fmi3DoStep restarted the model step at each contact switch,
+    each with a fresh budget of max_rhs_evaluations and switches: doStep(0, 1e6) with torques into
+    the wall made 130,000 callbacks and ran on. One budget for the whole call now: refused
+    (fmi3Discard, undone whole) after at most 1000 switches. Past 3000 callbacks, the callback
+    ends the step (a hang guard for the old behaviour, which would fail the test)."""
+    from conftest import contact_torques
+
+    calls: list[float] = []
+
+    def update(_env, t, _set, _get, _finished, _can_return, requested, _when):
+        calls.append(t)
+        requested[0] = len(calls) > 3000
+
+    plant = Plant(fmi3_dir, earlyReturnAllowed=True, intermediateUpdate=update)
+    if max_rhs is not None:
+        plant.fmu.setInt32([plant.vr["max_rhs_evaluations"]], [max_rhs])
+    plant.fmu.enterInitializationMode(startTime=0.0)
+    plant.fmu.exitInitializationMode()
+    start = plant.get(STATE)
+    plant.set_torques(contact_torques(DT)[0])  # into the wall, and held there
+    flags = [ctypes.c_bool() for _ in range(3)]
+    last = ctypes.c_double(-1.0)
+    status = plant.raw("fmi3DoStep", 0.0, 1e6, True, *(ctypes.byref(f) for f in flags),
+                       ctypes.byref(last))  # fmt: skip
+    assert status == DISCARD and refusal in plant.log[-1], (len(calls), plant.log[-1:])
+    assert 0 < len(calls) <= 1000 and last.value == 0.0
+    assert plant.get(STATE) == start

@@ -26,6 +26,7 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C c
 DT = 1 / 400
 PLANT, CONTROLLER, CLOCKED = "PumaPlant.fmu", "ImpedanceController.fmu", f"{CLOCKED_NAME}.fmu"
 HOST = Path(__file__).parent / "c_host" / "host3.c"
+FREE_IN_UPDATE = Path(__file__).parent / "c_host" / "free_in_update.c"
 ERROR = 3  # fmi3Error
 
 
@@ -229,6 +230,47 @@ def test_fmi3_no_leaks_under_valgrind(fmi3_dir, tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "All heap blocks were freed" in done.stderr
     assert "ERROR SUMMARY: 0 errors" in done.stderr
+
+
+def _free_in_update(fmi3_dir: Path, tmp_path: Path) -> list[str]:
+    """The C host of free_in_update.c, built, and its arguments for the FMI 3.0 plant."""
+    exe = tmp_path / "free_in_update"
+    headers = Path(fmpy.__file__).parent / "c-code"
+    subprocess.run(["gcc", "-std=c99", "-O0", "-g", "-Wall", "-Wextra", "-Werror", f"-I{headers}",
+                    str(FREE_IN_UPDATE), "-ldl", "-o", str(exe)], check=True)  # fmt: skip
+    md = read_model_description(str(fmi3_dir / PLANT))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    lib = Path(extract(str(fmi3_dir / PLANT))) / "binaries" / "x86_64-linux" / "PumaPlant.so"
+    return [str(exe), str(lib), md.guid, str(vr["tau2"]), str(vr["x"])]
+
+
+def _check_free_in_update(out: str) -> None:
+    """Each fmi3FreeInstance in the callback refused with a message; the steps went on."""
+    calls = int(out.split("callbacks=")[1].split()[0])
+    assert calls >= 2, out  # the wrist closes and opens contact in the 2 s step
+    assert "step=0 get=0 step_after=0" in out, out
+    refusals = out.count("fmi3FreeInstance called inside the intermediate update callback")
+    assert refusals == calls, out
+
+
+def test_free_instance_inside_the_intermediate_update_is_refused(fmi3_dir, tmp_path):
+    """Issue 34: fmi3FreeInstance from inside the callback freed the instance, and fmi3DoStep
+    then read the freed block. Refused now, the instance steps on and frees at the end."""
+    done = subprocess.run(_free_in_update(fmi3_dir, tmp_path), capture_output=True, text=True,
+                          timeout=120)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    _check_free_in_update(done.stdout)
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
+def test_free_instance_inside_the_intermediate_update_under_valgrind(fmi3_dir, tmp_path):
+    """The same under valgrind: no invalid read (of the freed instance), nothing leaked."""
+    cmd = ["valgrind", "--leak-check=full", "--errors-for-leak-kinds=definite",
+           "--error-exitcode=3", *_free_in_update(fmi3_dir, tmp_path)]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "Invalid read" not in done.stderr and "ERROR SUMMARY: 0 errors" in done.stderr
+    _check_free_in_update(done.stdout)
 
 
 def test_tunable_gains_change_after_initialization_fixed_parameters_do_not(fmi3_dir):

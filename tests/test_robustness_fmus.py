@@ -83,6 +83,12 @@ class Slave:
     def step(self, t: float, h: float) -> int:
         return self.f["fmi2DoStep"](self.c, t, h, 1)
 
+    def terminated(self) -> str:
+        """fmi2GetBooleanStatus(fmi2Terminated) as 'status/value'."""
+        value = ctypes.c_int(-1)
+        status = self.f["fmi2GetBooleanStatus"](self.c, 3, ctypes.byref(value))  # fmi2Terminated
+        return f"{status}/{value.value}"
+
     def get_state(self) -> ctypes.c_void_p:
         state = ctypes.c_void_p()
         assert self.f["fmi2GetFMUstate"](self.c, ctypes.byref(state)) == OK
@@ -222,8 +228,10 @@ def case_big_step(path: str, h: str, param: str) -> None:
     start = time.perf_counter()
     status = s.step(0.0, float(h))
     print(f"status={status} seconds={time.perf_counter() - start:.3f}")
+    print(f"terminated={s.terminated()}")
     print("log=" + " | ".join(s.logs), flush=True)
     assert s.step(0.0, DT) == OK  # still at t = 0, and usable
+    print(f"terminated_after_ok={s.terminated()}", flush=True)
 
 
 def case_nan_time(path: str) -> None:
@@ -346,7 +354,9 @@ BIG_STEPS = [  # fmu, step, parameter, message
 def test_steps_needing_too_much_work_are_refused(
     fmu_dir, native_dir, flavour, name, h, param, message
 ):
-    """fmi2Discard at once, with the reason; the FMU stays at the step's start."""
+    """fmi2Discard at once, with the reason; the FMU stays at the step's start. The refusal
+    says fmi2Terminated (a host that can only retry the step must stop: fmpy simulate retried
+    the native FMUs' step forever); after a step taken from there it no longer does."""
     if flavour == "native" and shutil.which("gcc") is None:
         pytest.skip("needs a C compiler")
     path = (native_dir if flavour == "native" else fmu_dir) / name
@@ -357,6 +367,30 @@ def test_steps_needing_too_much_work_are_refused(
     assert done.returncode == 0, done.stderr
     assert f"status={DISCARD}" in done.stdout
     assert message in done.stdout + done.stderr
+    assert f"terminated={OK}/1" in done.stdout
+    if flavour == "native":  # pythonfmu 0.7's wrapper answers true whatever happened
+        assert f"terminated_after_ok={OK}/0" in done.stdout
+
+
+@needs_cc
+@pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+def test_fmpy_simulate_stops_at_a_step_that_is_refused(native_dir, name):
+    """fmpy's simulate loop retries a discarded step until fmi2Terminated says stop: the native
+    FMUs said false, and `fmpy simulate --output-interval 1e6 --stop-time 1e6` never ended (issue
+    34). Now it stops at the refusal, at t = 0. The timeout only guards against the hang."""
+    code = (
+        "import sys\n"
+        "from fmpy import simulate_fmu\n"
+        "r = simulate_fmu(sys.argv[1], output_interval=1e6, stop_time=1e6)\n"
+        "print('rows', len(r), 'last', r['time'][-1])\n"
+    )
+    try:
+        done = subprocess.run([sys.executable, "-c", code, str(native_dir / name)],
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
+    except subprocess.TimeoutExpired:
+        pytest.fail("fmpy retried the refused step for 5 minutes")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "last 0.0" in done.stdout
 
 
 @pytest.mark.parametrize("flavour", ["python", "native"])

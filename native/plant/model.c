@@ -389,8 +389,11 @@ int model_initialize(Data *d, char *msg)
 }
 
 /* model_step; with reached (FMI 3 early return) it stops at the first contact switch inside the
- * step, the switch then done, and says where it stopped (t + h when there was none). */
-static int plant_step(Data *d, double t, double h, double *reached, char *msg)
+ * step, the switch then done, and says where it stopped (t + h when there was none). With work,
+ * the evaluations and switches of the fmi3DoStep so far count against its bounds, and this
+ * step's are added to them. */
+static int plant_step(Data *d, double t, double h, double *reached, StepWork *work,
+                      char *msg)
 {
     static const char *const inputs[3] = {"tau1", "tau2", "tau3"};
     ModelState *m = &d->m;
@@ -398,9 +401,9 @@ static int plant_step(Data *d, double t, double h, double *reached, char *msg)
     OdeResult res;
     double y[ODE_N], t_end, t_cur, hh, scale;
     char err[ODE_MSG_MAX], a[REPR], b[REPR];
-    int mode, switches = 0;
+    int mode, switches = work ? work->switches : 0;
     const int euler = (int)d->i[VR_euler_substeps];
-    int64_t budget = d->i[VR_max_rhs_evaluations];
+    int64_t budget = d->i[VR_max_rhs_evaluations] - (work ? work->rhs_evaluations : 0);
     read_ctx(d, &c);
     c.budget = &budget;
     c.max_evaluations = d->i[VR_max_rhs_evaluations];
@@ -449,14 +452,18 @@ static int plant_step(Data *d, double t, double h, double *reached, char *msg)
         }
         mode = !mode;
         switches += 1;
-        if (reached) { /* return early, at the switch (FMI 3 co-simulation only) */
-            t_end = t_cur;
-            break;
-        }
         if (switches > MAX_SWITCHES) {
             return fail(msg, "plant integration failed: contact chattering: more than %d switches"
                              " in a step", MAX_SWITCHES);
         }
+        if (reached) { /* return early, at the switch (FMI 3 co-simulation only) */
+            t_end = t_cur;
+            break;
+        }
+    }
+    if (work) {
+        work->rhs_evaluations = d->i[VR_max_rhs_evaluations] - budget;
+        work->switches = switches;
     }
     m->t = t_end;
     for (int i = 0; i < 3; i++) {
@@ -477,12 +484,12 @@ static int plant_step(Data *d, double t, double h, double *reached, char *msg)
 
 int model_step(Data *d, double t, double h, char *msg)
 {
-    return plant_step(d, t, h, NULL, msg);
+    return plant_step(d, t, h, NULL, NULL, msg);
 }
 
-int model_step_early(Data *d, double t, double h, double *reached, char *msg)
+int model_step_early(Data *d, double t, double h, double *reached, StepWork *work, char *msg)
 {
-    return plant_step(d, t, h, reached, msg);
+    return plant_step(d, t, h, reached, work, msg);
 }
 
 int model_check_state(const Data *d, char *msg)

@@ -5,9 +5,10 @@
  * Errors are always logged (whatever fmi2SetDebugLogging says); other messages only with logging
  * on. Parameter values are checked when set (finite, >= min) and again before initialization;
  * non-finite inputs are refused when set. A step that cannot be taken returns fmi2Discard and
- * leaves the instance at the step's start. A serialized FMU state carries a CRC-32 over all its
- * bytes and holds finite numbers only: anything else is refused (fmi2Error, logged), and so is
- * the state of another build (see SerialHeader).
+ * leaves the instance at the step's start; fmi2GetBooleanStatus(fmi2Terminated) then says true,
+ * so that a master which can only retry the same step (fmpy simulate) stops. A serialized FMU
+ * state carries a CRC-32 over all its bytes and holds finite numbers only: anything else is
+ * refused (fmi2Error, logged), and so is the state of another build (see SerialHeader).
  */
 #include <math.h>
 #include <stdarg.h>
@@ -311,6 +312,7 @@ fmi2Status fmi2Reset(fmi2Component c)
     inst->s.dirty = 1;
     inst->s.last_time = 0.0;
     inst->s.me_time_set = 0;
+    inst->step_refused = 0;
     return fmi2OK;
 }
 
@@ -566,9 +568,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
         log_message(inst, fmi2Error, "logStatusError", "at t=%.17g: %s",
                     currentCommunicationPoint, inst->msg);
         inst->s.last_time = currentCommunicationPoint;
+        inst->step_refused = 1;
         return fmi2Discard;
     }
     inst->s.last_time = currentCommunicationPoint + communicationStepSize;
+    inst->step_refused = 0;
     return fmi2OK;
 }
 
@@ -957,7 +961,9 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
     if (s != fmi2Terminated) {
         return ERROR(inst, "fmi2GetBooleanStatus supports fmi2Terminated only");
     }
-    *value = fmi2False;
+    /* after a refused step: the same step would be refused again (the model is deterministic),
+     * so the master must stop (or go on from another FMU state or with a smaller step) */
+    *value = inst->step_refused ? fmi2True : fmi2False;
     return fmi2OK;
 }
 

@@ -124,6 +124,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *eventHandlingNeeded = fmi3False;
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
+    memset(&w->work, 0, sizeof w->work); /* one work bound for the whole call */
     backup_m = w->inner->s.d.m;
     memcpy(backup_r, w->inner->s.d.r, sizeof backup_r);
     for (;;) {

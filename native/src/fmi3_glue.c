@@ -30,8 +30,9 @@ int model_step(Data *d, double t, double h, char *msg);
 
 #include "fmi3_wrapper.h" /* Wrapper, WRAP, FAIL */
 #if HAS_EARLY_RETURN
-/* model.c: model_step that stops at the first discrete-state switch inside the step */
-int model_step_early(Data *d, double t, double h, double *reached, char *msg);
+/* model.c: model_step that stops at the first discrete-state switch inside the step, its work
+ * added to *work (the fmi3DoStep's so far: the bounds hold for that whole) */
+int model_step_early(Data *d, double t, double h, double *reached, StepWork *work, char *msg);
 #endif
 
 #ifndef MODEL_EXCHANGE
@@ -48,7 +49,7 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
     Wrapper *w = (Wrapper *)inst->cb.componentEnvironment;
 #if HAS_EARLY_RETURN
     if (w->early_return && w->inner == inst) {
-        return model_step_early(d, t, h, &w->reached, msg);
+        return model_step_early(d, t, h, &w->reached, &w->work, msg);
     }
 #endif
     w->reached = t + h;
@@ -259,8 +260,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(
 void fmi3FreeInstance(fmi3Instance instance)
 {
     Wrapper *w = wrapper_of(instance, "fmi3FreeInstance");
-    if (!w) {
-        return;
+    if (!w || !allowed_in_update(w, "fmi3FreeInstance")) {
+        return; /* refused inside the intermediate update: fmi3DoStep goes on with w */
     }
     fmi2FreeInstance(w->inner);
     *(volatile unsigned *)&w->magic = 0; /* volatile: the store must survive free() */

@@ -24,6 +24,7 @@ typedef struct {
     fmi3LogMessageCallback log;
     int early_return; /* co-simulation: the model step stops at each switch (model_step_early) */
     double reached;   /* where the last model step stopped */
+    StepWork work;    /* the current fmi3DoStep's work so far, across its model steps */
     int early_allowed;  /* the importer's earlyReturnAllowed */
     int event_mode_used; /* the importer's eventModeUsed */
     int cs_event_mode;   /* co-simulation, eventModeUsed: in Event Mode (else Step Mode) */

@@ -79,6 +79,14 @@ typedef struct {
 extern const StateReals MODEL_STATE_REALS[];
 extern const int N_MODEL_STATE_REALS;
 
+/* The work of one FMI 3.0 fmi3DoStep so far, across the model steps it restarts at the switches
+ * (model_step_early): zeroed at the start of each fmi3DoStep, so the model's per-step bounds
+ * (max_rhs_evaluations, the switches per step) hold for the fmi3DoStep call whole. */
+typedef struct {
+    long long rhs_evaluations;
+    int switches;
+} StepWork;
+
 /* snprintf into msg (MSG_MAX bytes); returns 1 so models can write `return fail(msg, ...)` */
 int fail(char *msg, const char *fmt, ...);
 

@@ -40,6 +40,8 @@ typedef struct {
     char name[128];
     int logging_on;
     fmi2Type type; /* fmi2CoSimulation or fmi2ModelExchange */
+    int step_refused; /* the last fmi2DoStep returned fmi2Discard: fmi2Terminated is true then
+                         (the same step would be refused again; not part of an FMU state) */
     char msg[MSG_MAX];
 } Instance;
 

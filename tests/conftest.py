@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,17 @@ from impedance_cosim.physics.linalg3 import matvec
 from plant_model.model import PlantModel
 
 DT = 1 / 400
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Compile each platform's FMU libraries once per set of sources, for every fixture, test
+    and `impedance-cosim build` subprocess of this run and later ones (packaging/build_cache.py;
+    keyed by the sources' and the compiler's hash, so an edit is always recompiled). A cache
+    folder given in the environment is kept; IMPCOSIM_BUILD_CACHE= (empty) turns it off."""
+    os.environ.setdefault("IMPCOSIM_BUILD_CACHE", str(REPO / ".cache" / "build"))
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:

@@ -27,11 +27,14 @@ ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu", "fmi3/*.fmu")
 
 @pytest.fixture(scope="module")
 def two_builds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """The bundle built twice from scratch, in two temporary folders: once in this process,
-    once through the command line in a fresh process (so no cache is shared)."""
+    """The bundle built twice from scratch, in two temporary folders: once in this process
+    with every library compiled (the build cache off), once through the command line in a
+    fresh process (its libraries from the cache: compiled by an earlier build)."""
     a = tmp_path_factory.mktemp("build_a")
     b = tmp_path_factory.mktemp("build_b")
-    build_dist(a / "dist", a / "fmus")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.delenv("IMPCOSIM_BUILD_CACHE", raising=False)
+        build_dist(a / "dist", a / "fmus")
     done = subprocess.run(
         [
             sys.executable,

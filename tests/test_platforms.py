@@ -257,9 +257,10 @@ def test_a_compiler_that_fails_on_our_sources_fails_the_build(tmp_path, monkeypa
     assert not (tmp_path / PLANT).exists()
 
 
-def test_same_sources_give_byte_identical_binaries(tmp_path):
+def test_same_sources_give_byte_identical_binaries(tmp_path, monkeypatch):
     """Two builds in different folders give the same archive bytes, every platform's library
-    included (no temp path, no time stamp in any of them)."""
+    included (no temp path, no time stamp in any of them); both compiled, not cached."""
+    monkeypatch.delenv("IMPCOSIM_BUILD_CACHE", raising=False)
     first = build_native_fmu(FMUS["plant"], tmp_path / "a").read_bytes()
     second = build_native_fmu(FMUS["plant"], tmp_path / "b").read_bytes()
     assert first == second

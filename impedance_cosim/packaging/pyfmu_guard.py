@@ -21,7 +21,7 @@ from impedance_cosim.packaging.toolchains import (
     FMI3_PLATFORMS,
     TOOLCHAINS,
     Toolchain,
-    compile_library,
+    build_library,
 )
 
 REAL = ".pythonfmu"  # the original's name: <id>.pythonfmu<suffix>
@@ -239,5 +239,5 @@ def _compile(
             (src / header.name).write_bytes(header.read_bytes())
         lib = Path(tmp) / name  # a DLL records its own file name: keep the final one
         lib.parent.mkdir(parents=True)
-        compile_library(toolchain, src, ["guard.c"], lib)
+        build_library(toolchain, src, ["guard.c"], lib, name)
         return lib.read_bytes()

@@ -25,7 +25,10 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
+
+from impedance_cosim.packaging import build_cache
 
 # The same flags for every platform (-fPIC only where it means something).
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-Wextra")
@@ -220,6 +223,17 @@ def build_binaries(
         name = f"binaries/{folder}/{model_identifier}{toolchain.suffix}"
         lib = Path(src).parent / name  # a DLL records its own file name: keep the final one
         lib.parent.mkdir(parents=True, exist_ok=True)
-        compile_library(toolchain, src, c_files, lib)
+        build_library(toolchain, src, c_files, lib, name)
         binaries[name] = lib.read_bytes()
     return binaries
+
+
+def build_library(
+    toolchain: Toolchain, src: Path, c_files: list[str], lib: Path, name: str
+) -> None:
+    """compile_library through the build cache (build_cache.py, when IMPCOSIM_BUILD_CACHE is
+    set); name is the library's place in its archive, part of the cache key."""
+    key = [name, build_cache.compiler_identity(toolchain.compiler), *CFLAGS, *toolchain.flags,
+           *toolchain.libs]  # fmt: skip
+    build = partial(compile_library, toolchain, src, c_files, lib)
+    build_cache.cached_build(key, Path(src), c_files, lib, build)

@@ -25,6 +25,18 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ.setdefault("IMPCOSIM_BUILD_CACHE", str(REPO / ".cache" / "build"))
 
 
+CROSS_PLATFORMS = {"win64", "aarch64-linux"}  # built by cross compilers, run under wine/qemu
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A test parametrized over a cross platform needs its tools: mark it `tools` (the others
+    that need them carry the mark themselves)."""
+    for item in items:
+        params = getattr(getattr(item, "callspec", None), "params", {})
+        if params.get("platform") in CROSS_PLATFORMS:
+            item.add_marker(pytest.mark.tools)
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     session.config._impcosim_status = int(exitstatus)  # for pytest_unconfigure
 

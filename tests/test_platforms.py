@@ -171,6 +171,7 @@ def _machine(name: str, data: bytes) -> int:
 
 
 @pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+@pytest.mark.tools
 def test_each_native_fmu_carries_every_platform(native_dir, name):
     """binaries/linux64, win64 and aarch64-linux, each for the right machine, and still valid."""
     need_compiler("win64")
@@ -192,6 +193,7 @@ def test_each_native_fmu_carries_every_platform(native_dir, name):
 
 
 @pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+@pytest.mark.tools
 def test_win64_dll_imports_only_the_system_c_runtime(native_dir, tmp_path, name):
     need_compiler("win64")
     objdump = shutil.which("x86_64-w64-mingw32-objdump")
@@ -241,6 +243,7 @@ def test_missing_cross_compilers_are_a_note_not_a_failure(tmp_path, monkeypatch,
         assert binaries == [f"binaries/linux64/{fmu.stem}.so"]
 
 
+@pytest.mark.tools
 def test_a_compiler_that_fails_on_our_sources_fails_the_build(tmp_path, monkeypatch):
     """A compiler that passes the probe but fails on the FMU's sources is an error naming the
     platform, not a silent gap (the probe's tiny compile works, ours does not)."""

@@ -352,6 +352,7 @@ def _dump_dom(url: str, profile: Path) -> str:
     return done.stdout
 
 
+@pytest.mark.tools
 def test_chromium_opens_the_report_and_decodes_every_image(paper_run, tmp_path):
     dom = _dump_dom((paper_run / "report.html").as_uri(), tmp_path / "profile")
     assert "<h1>impedance-cosim run: observer ok, difference ok; Fig. 4 comparison" in dom

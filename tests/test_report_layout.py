@@ -53,6 +53,7 @@ def _widths(page: Path, profile: Path) -> tuple[int, int]:
     return int(found[1]), int(found[2])
 
 
+@pytest.mark.tools
 def test_no_table_is_wider_than_a_1280_px_window(short_run, tmp_path):
     width, window = _widths(short_run / "report.html", tmp_path / "profile")
     assert window >= 1200 and width <= window, (width, window)

@@ -70,9 +70,9 @@ def main() -> None:
     args = parser.parse_args()
     tiers = args.tiers.split(",")
     xdist = ["-n", args.workers] if args.workers != "0" else []
-    subprocess.run([sys.executable, "-m", "impedance_cosim", "build", "--out",
-                    tempfile.mkdtemp()], cwd=REPO, capture_output=True,
-                   env={**os.environ, "IMPCOSIM_BUILD_CACHE": str(REPO / ".cache" / "build")})  # fmt: skip
+    cache = {**os.environ, "IMPCOSIM_BUILD_CACHE": str(REPO / ".cache" / "build")}
+    build = [sys.executable, "-m", "impedance_cosim", "build", "--out", tempfile.mkdtemp()]
+    subprocess.run(build, cwd=REPO, capture_output=True, env=cache)
     busy = [subprocess.Popen([sys.executable, "-c", BUSY]) for _ in range(args.busy)]
     try:
         print(f"workers {args.workers}, busy processes {args.busy}, {os.cpu_count()} cores")
@@ -90,8 +90,10 @@ def main() -> None:
             kept = sum(len(v & fast.get(f, set())) for f, v in full.items())
             unseen = sorted(Path(f).relative_to(REPO).as_posix() for f in full
                             if full[f] and not fast.get(f))  # fmt: skip
-            print(f"fast tier covers {kept} of the {total} lines the full suite covers:"
-                  f" {100 * kept / total:.1f} %")
+            print(
+                f"fast tier covers {kept} of the {total} lines the full suite covers:"
+                f" {100 * kept / total:.1f} %"
+            )
             print(f"modules the full suite runs and the fast tier does not: {unseen or 'none'}")
     finally:
         for p in busy:

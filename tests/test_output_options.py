@@ -48,6 +48,37 @@ def test_an_interval_not_a_multiple_of_the_step_is_bad_input(native_ssp, tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("interval", ["0.4", "5", "1"])
+def test_an_interval_that_does_not_divide_the_run_is_bad_input(native_ssp, tmp_path, capsys,
+                                                               interval) -> None:  # fmt: skip
+    """The row at the stop time would be lost (4.5 s every 0.4 s ends at 4.4 s): refused."""
+    assert run(native_ssp, tmp_path / "out", "--output-interval", interval) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"impedance-cosim run: error: --output-interval {interval} s does not divide"
+                   " the run length 4.5 s (--stop): the row at the stop time would be"
+                   " lost"]  # fmt: skip
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (
+            ["--stop", "1", "--output-interval", "0.3"],
+            "--output-interval 0.3 s does not divide the run length 1 s (--stop)",
+        ),
+        (["--stop", "1e-300"], "the run length 1e-300 s is shorter than one 0.0025 s step"),
+    ],
+)
+def test_swap_shares_the_time_checks(native_ssp, native_dir, tmp_path, capsys, extra, message):
+    assert main(["swap", "--ssp", str(native_ssp), "--replace",
+                 f"controller={native_dir / 'ImpedanceController.fmu'}", "--no-progress",
+                 "--out", str(tmp_path / "out"), *extra]) == 2  # fmt: skip
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("impedance-cosim swap: error: ") and message in line, line
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("interval", [[], ["--output-interval", "0.005"]])
 def test_mat_results_read_back_with_buildingspy_bit_for_bit(native_ssp, tmp_path, interval):
     from buildingspy.io.outputfile import Reader

@@ -321,6 +321,12 @@ DIGITS = "9" * 5000
 BAD_INPUT = [
     (["run", "--scenario", "nosuch"], "no parameter set 'nosuch'"),
     (["run", "--stop", "0.001"], "is not a whole number of 0.0025 s steps"),
+    (["run", "--stop", "1e-300"], "the run length 1e-300 s is shorter than one 0.0025 s step"),
+    (["run", "--stop", "1e-12"], "the run length 1e-12 s is shorter than one 0.0025 s step"),
+    (
+        ["sweep", "--serial", "--grid", "controller.K=10,20", "--stop", "1e-300"],
+        "the run length 1e-300 s is shorter than one 0.0025 s step",
+    ),
     (["run", "--set", "controller.nosuch=1"], "unknown parameter controller.nosuch"),
     (["run", "--set", f"plant.m3={DIGITS}"], "(5000 characters) is out of range"),
     (["run", "--rt-cpu", "1"], "--rt-cpu only apply with --realtime"),

@@ -86,8 +86,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 0
     pair = [] if args.no_figures else ["observer", "difference"]
     for scenario in [args.scenario, *(s for s in pair if s in system.parameter_sets)]:
-        step = _master(args, system, overrides, scenario, args.algorithm).step_size
-        args.output_every = output_every(getattr(args, "output_interval", None), step)
+        master = _master(args, system, overrides, scenario, args.algorithm)
+        steps = round((master.stop_time - master.start_time) / master.step_size)
+        interval = getattr(args, "output_interval", None)
+        args.output_every = output_every(interval, master.step_size, steps)
     with FolderLock(prepare_out(out), "--out"):
         return _run_scenarios(args, ssp, overrides, out)
 

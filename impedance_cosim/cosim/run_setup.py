@@ -23,6 +23,10 @@ class MasterError(RuntimeError):
     """The system cannot be run as configured (bad parameter name, missing connector...)."""
 
 
+class NoStepError(MasterError, ValueError):
+    """A stop time that gives no communication step at all (also a ValueError: a bad argument)."""
+
+
 def split_name(name: str) -> tuple[str, str]:
     """ "component.variable" -> (component, variable), with a clear error."""
     if "." not in name:
@@ -75,6 +79,9 @@ def step_count(start_time: float, stop_time: float | None, step_size: float | No
             f"the run length {stop_time - start_time:g} s is not a whole number of"
             f" {step_size:g} s steps"
         )
+    if round(steps) < 1:  # e.g. 1e-300 s: no step at all, so no result to speak of
+        raise NoStepError(f"the run length {stop_time - start_time:g} s is shorter than one"
+                          f" {step_size:g} s step")  # fmt: skip
     return steps
 
 

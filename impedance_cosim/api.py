@@ -228,6 +228,8 @@ def sweep(
     if not values:
         raise ValueError("values is empty: nothing to sweep")
     options = _options(stop_time, step_size, algorithm, overrides, None, False)
+    if parameter in options["overrides"]:  # the swept values would silently replace it
+        raise ValueError(f"overrides sets {parameter}, the swept parameter: give it in one place")
     runs = [{**options, "overrides": {**options["overrides"], parameter: v}} for v in values]
     from impedance_cosim.util.progress import Progress
 

@@ -194,6 +194,8 @@ def test_sweep_runs_each_value(ssp_path, monkeypatch):
     assert ran == []
     with pytest.raises(ValueError, match="values is empty"):
         ic.sweep("controller.G1", [], ssp=ssp_path)
+    with pytest.raises(ValueError, match="overrides sets controller.G1, the swept parameter"):
+        ic.sweep("controller.G1", [500], ssp=ssp_path, overrides={"controller.G1": 800})
 
 
 def test_import_stays_light_and_the_api_is_lazy():

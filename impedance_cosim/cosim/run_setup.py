@@ -124,10 +124,13 @@ def collect_parameters(
     values: dict[str, dict[str, Any]] = {name: {} for name in fmu_files}
     for p in system.parameter_sets.get(parameter_set, []):
         comp, var = split_name(p.name)
-        v = _parameter_variable(variables, comp, var, f"in parameter set {parameter_set!r}")
-        if p.unit and v.unit and p.unit != v.unit:
-            raise MasterError(f"parameter {p.name}: unit {p.unit} but the FMU's is {v.unit}")
-        values[comp][var] = _value(v, p.value, p.name)
+        try:
+            v = _parameter_variable(variables, comp, var, f"in parameter set {parameter_set!r}")
+            if p.unit and v.unit and p.unit != v.unit:
+                raise MasterError(f"parameter {p.name}: unit {p.unit} but the FMU's is {v.unit}")
+            values[comp][var] = _value(v, p.value, p.name)
+        except MasterError as exc:  # named with the archive and its .ssv member
+            raise MasterError(f"{p.origin}: {exc}" if p.origin else str(exc)) from None
     for name, value in overrides.items():
         comp, var = split_name(name)
         targets = [var]

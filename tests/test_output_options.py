@@ -79,6 +79,72 @@ def test_swap_shares_the_time_checks(native_ssp, native_dir, tmp_path, capsys, e
     assert not (tmp_path / "out").exists()
 
 
+def test_an_interrupt_while_the_mat_file_is_written_keeps_the_rows(
+    native_ssp, tmp_path, capsys, monkeypatch
+) -> None:
+    """Ctrl-C as the finished run's .mat is written (the writer raises KeyboardInterrupt): the
+    rows go to observer.mat.partial, the line says so, run.json records the run, and the
+    earlier run's observer.mat is left as it was (on main: nothing kept, "runs": [])."""
+    import scipy.io
+    from scipy.io import loadmat
+
+    out = tmp_path / "out"
+    assert run(native_ssp, out, "--result-format", "mat") == 0
+    before = (out / "observer.mat").read_bytes()
+    real, calls = scipy.io.savemat, []
+
+    def interrupted_once(path, *args, **kwargs):
+        calls.append(path)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(scipy.io, "savemat", interrupted_once)
+    capsys.readouterr()
+    assert run(native_ssp, out, "--result-format", "mat") == 130
+    partial = out / "observer.mat.partial"
+    *removed, line = capsys.readouterr().err.strip().splitlines()  # the earlier summary: stale
+    assert [r.endswith("observer_summary.json") for r in removed] == [True]
+    mat = out / "observer.mat"
+    assert line == (f"impedance-cosim run: interrupted (SIGINT) while writing {mat}; the 1801"
+                    f" rows (to t=4.5 s) are in {partial}")  # fmt: skip
+    assert (out / "observer.mat").read_bytes() == before
+    assert loadmat(partial)["data_2"].shape[1] == 1801
+    entry = json.loads((out / "run.json").read_text())["runs"][0]
+    assert (
+        entry["status"] == "interrupted"
+        and entry["rows"] == 1801
+        and str(partial) in entry["error"]
+    )
+
+
+def test_an_interrupt_as_the_csv_is_renamed_into_place_keeps_run_json(
+    native_ssp, tmp_path, capsys, monkeypatch
+):
+    """Ctrl-C right after the finished run's CSV is renamed into place: the CSV is whole and
+    run.json records the run (on main it said "runs": [])."""
+    from impedance_cosim.util import atomic
+
+    real = atomic.replace
+
+    def then_interrupted(tmp, target):
+        real(tmp, target)
+        if str(target).endswith("observer.csv"):
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(atomic, "replace", then_interrupted)
+    out = tmp_path / "out"
+    assert run(native_ssp, out) == 130
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert (
+        line
+        == f"impedance-cosim run: interrupted (SIGINT); 1801 rows kept in {out / 'observer.csv'}"
+    )
+    assert len((out / "observer.csv").read_text().splitlines()) == 1 + 1801
+    entry = json.loads((out / "run.json").read_text())["runs"][0]
+    assert entry["status"] == "interrupted" and entry["rows"] == 1801
+
+
 @pytest.mark.parametrize("interval", [[], ["--output-interval", "0.005"]])
 def test_mat_results_read_back_with_buildingspy_bit_for_bit(native_ssp, tmp_path, interval):
     from buildingspy.io.outputfile import Reader

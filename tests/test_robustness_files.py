@@ -110,6 +110,31 @@ def test_a_file_size_limit_is_a_full_disk_without_a_mount(native_ssp, tmp_path):
     assert (out / "report.html").is_file()
 
 
+def test_a_mat_file_that_does_not_fit_keeps_the_rows_that_fit_and_says_where(native_ssp, tmp_path):
+    """--result-format mat under a 1 MB file size limit: the whole file (8001 rows) does not fit;
+    the first rows that do are a result file of their own, observer.mat.partial, and the line
+    and run.json say so (on main: no rows kept, nothing said)."""
+    import json
+
+    from scipy.io import loadmat
+
+    out = tmp_path / "out"
+    done = cli("run", "--ssp", str(native_ssp), "--stop", "20", "--out", str(out),
+               "--result-format", "mat", "--no-figures", "--no-report", "--no-progress",
+               cwd=tmp_path, limit=2**20)  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
+    partial = out / "observer.mat.partial"
+    match = re.search(r"the first (\d+) of the 8001 rows \(to t=([\d.]+) s\) are in (\S+)$", line)
+    assert f"cannot write observer.mat in {out}: File too large" in line and match, line
+    assert match.group(3) == str(partial) and not (out / "observer.mat").exists()
+    kept = loadmat(partial)["data_2"]
+    assert kept.shape[1] == int(match.group(1)) > 1000
+    assert f"{kept[0, -1]:.9g}" == match.group(2) and kept[0, 0] == 0.0
+    run = json.loads((out / "run.json").read_text())["runs"][0]
+    assert run["status"] == "failed" and str(partial) in run["error"] and run["rows"] == 8001
+
+
 def test_a_figure_that_does_not_fit_is_named_and_not_left_half_written(native_ssp, tmp_path):
     """The CSV fits on a 64 kB tmpfs, Fig. 1 does not: the line names the figure (not its
     temporary name, even through nested temporary files) and its folder; no half figure."""

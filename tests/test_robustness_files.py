@@ -405,3 +405,32 @@ def test_an_unusable_out_is_one_line_and_exit_2(native_ssp, tmp_path, command, o
         assert message in line and "Errno" not in line, line
         assert os.listdir(ro) == []
     assert os.listdir(cwd) == []
+
+
+def test_a_csv_whose_rename_fails_is_kept_as_partial(tmp_path, monkeypatch):
+    """The rows are whole when the CSV is renamed into place: a failed rename keeps them under
+    <name>.partial and says so (on main the temporary file was removed: every row lost)."""
+    import errno
+
+    import numpy as np
+
+    from impedance_cosim.cosim.results import CsvStream
+    from impedance_cosim.util import atomic
+
+    real = atomic.replace
+
+    def refuse_the_target(tmp, target):
+        if Path(target).name == "r.csv":
+            raise OSError(errno.EIO, "Input/output error")
+        real(tmp, target)
+
+    monkeypatch.setattr(atomic, "replace", refuse_the_target)
+    stream = CsvStream(tmp_path / "r.csv")
+    stream.write(["time", "x"], np.array([[0.0, 1.0], [0.5, 2.0]]))
+    with pytest.raises(atomic.WriteError) as err:
+        stream.close()
+    partial = tmp_path / "r.csv.partial"
+    assert str(err.value) == (f"cannot write r.csv in {tmp_path}: Input/output error; the 2 rows"
+                              f" are in {partial}")  # fmt: skip
+    assert partial.read_text().splitlines() == ["time,x", "0.0,1.0", "0.5,2.0"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv.partial"]

@@ -239,6 +239,9 @@ class CsvStream:
         try:
             atomic.replace(tmp, self.path)
         except OSError as exc:  # the rows are whole: kept under <name>.partial
+            if not self.keep_partial:
+                atomic.discard(tmp)
+                raise atomic.write_error(self.path, exc) from None
             partial = self.path.with_name(self.path.name + ".partial")
             try:
                 atomic.replace(tmp, partial)

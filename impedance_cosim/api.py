@@ -9,7 +9,8 @@
   is missing or older than the code it is built from; `ssp=` runs another archive.
 - Bad arguments raise at once, before anything runs, with a one-line message: ValueError
   (malformed argument), MasterError (the system rejects it: unknown scenario or parameter, wrong
-  step), SspError (a bad archive).
+  step; a stop time shorter than one step is a NoStepError, also a ValueError), SspError (a bad
+  archive).
 - A run that diverges or fails does not raise: like the CLI it keeps what it computed. The
   Result has `status` "diverged" (a signal left the bound: `divergence` says where, `summary`
   says so; the rows up to it are the result) or "failed" (an FMU reported an error), `ok` False,
@@ -227,6 +228,8 @@ def sweep(
     if not values:
         raise ValueError("values is empty: nothing to sweep")
     options = _options(stop_time, step_size, algorithm, overrides, None, False)
+    if parameter in options["overrides"]:  # the swept values would silently replace it
+        raise ValueError(f"overrides sets {parameter}, the swept parameter: give it in one place")
     runs = [{**options, "overrides": {**options["overrides"], parameter: v}} for v in values]
     from impedance_cosim.util.progress import Progress
 
@@ -330,8 +333,8 @@ def _master(system: SystemDescription, scenario: str | None, options: dict[str, 
             stop_time=options["stop_time"],
             fmu_files=options["fmu_files"] or None,
         )
-    except MasterError as exc:
-        raise MasterError(str(exc)) from None
+    except MasterError as exc:  # the same class (NoStepError is also a ValueError)
+        raise type(exc)(str(exc)) from None
 
 
 def _run(

@@ -137,6 +137,7 @@ def last_frame(excinfo) -> str:
         ({"stop_time": "5"}, ValueError, "stop_time must be a number"),
         ({"stop_time": -1.0}, ValueError, "stop_time must be a finite number > 0"),
         ({"step_size": 0.001, "stop_time": 0.0105}, MasterError, "not a whole number"),
+        ({"stop_time": 1e-300}, ValueError, "1e-300 s is shorter than one 0.0025 s step"),
         ({"algorithm": "newton"}, MasterError, "algorithm must be one of"),
         ({"overrides": ["controller.K=80"]}, ValueError, "overrides must be a dict"),
         ({"fmu_files": {"robot": "x.fmu"}}, MasterError, "no component 'robot'"),
@@ -193,6 +194,8 @@ def test_sweep_runs_each_value(ssp_path, monkeypatch):
     assert ran == []
     with pytest.raises(ValueError, match="values is empty"):
         ic.sweep("controller.G1", [], ssp=ssp_path)
+    with pytest.raises(ValueError, match="overrides sets controller.G1, the swept parameter"):
+        ic.sweep("controller.G1", [500], ssp=ssp_path, overrides={"controller.G1": 800})
 
 
 def test_import_stays_light_and_the_api_is_lazy():

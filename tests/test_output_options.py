@@ -48,6 +48,103 @@ def test_an_interval_not_a_multiple_of_the_step_is_bad_input(native_ssp, tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("interval", ["0.4", "5", "1"])
+def test_an_interval_that_does_not_divide_the_run_is_bad_input(native_ssp, tmp_path, capsys,
+                                                               interval) -> None:  # fmt: skip
+    """The row at the stop time would be lost (4.5 s every 0.4 s ends at 4.4 s): refused."""
+    assert run(native_ssp, tmp_path / "out", "--output-interval", interval) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"impedance-cosim run: error: --output-interval {interval} s does not divide"
+                   " the run length 4.5 s (--stop): the row at the stop time would be"
+                   " lost"]  # fmt: skip
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (
+            ["--stop", "1", "--output-interval", "0.3"],
+            "--output-interval 0.3 s does not divide the run length 1 s (--stop)",
+        ),
+        (["--stop", "1e-300"], "the run length 1e-300 s is shorter than one 0.0025 s step"),
+    ],
+)
+def test_swap_shares_the_time_checks(native_ssp, native_dir, tmp_path, capsys, extra, message):
+    assert main(["swap", "--ssp", str(native_ssp), "--replace",
+                 f"controller={native_dir / 'ImpedanceController.fmu'}", "--no-progress",
+                 "--out", str(tmp_path / "out"), *extra]) == 2  # fmt: skip
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("impedance-cosim swap: error: ") and message in line, line
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_interrupt_while_the_mat_file_is_written_keeps_the_rows(
+    native_ssp, tmp_path, capsys, monkeypatch
+) -> None:
+    """Ctrl-C as the finished run's .mat is written (the writer raises KeyboardInterrupt): the
+    rows go to observer.mat.partial, the line says so, run.json records the run, and the
+    earlier run's observer.mat is left as it was (on main: nothing kept, "runs": [])."""
+    import scipy.io
+    from scipy.io import loadmat
+
+    out = tmp_path / "out"
+    assert run(native_ssp, out, "--result-format", "mat") == 0
+    before = (out / "observer.mat").read_bytes()
+    real, calls = scipy.io.savemat, []
+
+    def interrupted_once(path, *args, **kwargs):
+        calls.append(path)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(scipy.io, "savemat", interrupted_once)
+    capsys.readouterr()
+    assert run(native_ssp, out, "--result-format", "mat") == 130
+    partial = out / "observer.mat.partial"
+    *removed, line = capsys.readouterr().err.strip().splitlines()  # the earlier summary: stale
+    assert [r.endswith("observer_summary.json") for r in removed] == [True]
+    mat = out / "observer.mat"
+    assert line == (f"impedance-cosim run: interrupted (SIGINT) while writing {mat}; the 1801"
+                    f" rows (to t=4.5 s) are in {partial}")  # fmt: skip
+    assert (out / "observer.mat").read_bytes() == before
+    assert loadmat(partial)["data_2"].shape[1] == 1801
+    entry = json.loads((out / "run.json").read_text())["runs"][0]
+    assert (
+        entry["status"] == "interrupted"
+        and entry["rows"] == 1801
+        and str(partial) in entry["error"]
+    )
+
+
+def test_an_interrupt_as_the_csv_is_renamed_into_place_keeps_run_json(
+    native_ssp, tmp_path, capsys, monkeypatch
+):
+    """Ctrl-C right after the finished run's CSV is renamed into place: the CSV is whole and
+    run.json records the run (on main it said "runs": [])."""
+    from impedance_cosim.util import atomic
+
+    real = atomic.replace
+
+    def then_interrupted(tmp, target):
+        real(tmp, target)
+        if str(target).endswith("observer.csv"):
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(atomic, "replace", then_interrupted)
+    out = tmp_path / "out"
+    assert run(native_ssp, out) == 130
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert (
+        line
+        == f"impedance-cosim run: interrupted (SIGINT); 1801 rows kept in {out / 'observer.csv'}"
+    )
+    assert len((out / "observer.csv").read_text().splitlines()) == 1 + 1801
+    entry = json.loads((out / "run.json").read_text())["runs"][0]
+    assert entry["status"] == "interrupted" and entry["rows"] == 1801
+
+
 @pytest.mark.parametrize("interval", [[], ["--output-interval", "0.005"]])
 def test_mat_results_read_back_with_buildingspy_bit_for_bit(native_ssp, tmp_path, interval):
     from buildingspy.io.outputfile import Reader

@@ -387,6 +387,8 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
         ({"stop_time": float("inf")}, "stop time must be finite"),
         ({"stop_time": float("nan")}, "stop time must be finite"),
         ({"stop_time": 1e300}, "GiB of memory"),
+        ({"stop_time": 1e-300}, "the run length 1e-300 s is shorter than one 0.0025 s step"),
+        ({"stop_time": 1.2e-12}, "is shorter than one 0.0025 s step"),
     ],
 )
 def test_master_refuses_bad_times(native_ssp, kwargs, message):

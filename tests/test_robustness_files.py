@@ -110,6 +110,31 @@ def test_a_file_size_limit_is_a_full_disk_without_a_mount(native_ssp, tmp_path):
     assert (out / "report.html").is_file()
 
 
+def test_a_mat_file_that_does_not_fit_keeps_the_rows_that_fit_and_says_where(native_ssp, tmp_path):
+    """--result-format mat under a 1 MB file size limit: the whole file (8001 rows) does not fit;
+    the first rows that do are a result file of their own, observer.mat.partial, and the line
+    and run.json say so (on main: no rows kept, nothing said)."""
+    import json
+
+    from scipy.io import loadmat
+
+    out = tmp_path / "out"
+    done = cli("run", "--ssp", str(native_ssp), "--stop", "20", "--out", str(out),
+               "--result-format", "mat", "--no-figures", "--no-report", "--no-progress",
+               cwd=tmp_path, limit=2**20)  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
+    partial = out / "observer.mat.partial"
+    match = re.search(r"the first (\d+) of the 8001 rows \(to t=([\d.]+) s\) are in (\S+)$", line)
+    assert f"cannot write observer.mat in {out}: File too large" in line and match, line
+    assert match.group(3) == str(partial) and not (out / "observer.mat").exists()
+    kept = loadmat(partial)["data_2"]
+    assert kept.shape[1] == int(match.group(1)) > 1000
+    assert f"{kept[0, -1]:.9g}" == match.group(2) and kept[0, 0] == 0.0
+    run = json.loads((out / "run.json").read_text())["runs"][0]
+    assert run["status"] == "failed" and str(partial) in run["error"] and run["rows"] == 8001
+
+
 def test_a_figure_that_does_not_fit_is_named_and_not_left_half_written(native_ssp, tmp_path):
     """The CSV fits on a 64 kB tmpfs, Fig. 1 does not: the line names the figure (not its
     temporary name, even through nested temporary files) and its folder; no half figure."""
@@ -321,6 +346,12 @@ DIGITS = "9" * 5000
 BAD_INPUT = [
     (["run", "--scenario", "nosuch"], "no parameter set 'nosuch'"),
     (["run", "--stop", "0.001"], "is not a whole number of 0.0025 s steps"),
+    (["run", "--stop", "1e-300"], "the run length 1e-300 s is shorter than one 0.0025 s step"),
+    (["run", "--stop", "1e-12"], "the run length 1e-12 s is shorter than one 0.0025 s step"),
+    (
+        ["sweep", "--serial", "--grid", "controller.K=10,20", "--stop", "1e-300"],
+        "the run length 1e-300 s is shorter than one 0.0025 s step",
+    ),
     (["run", "--set", "controller.nosuch=1"], "unknown parameter controller.nosuch"),
     (["run", "--set", f"plant.m3={DIGITS}"], "(5000 characters) is out of range"),
     (["run", "--rt-cpu", "1"], "--rt-cpu only apply with --realtime"),
@@ -374,3 +405,32 @@ def test_an_unusable_out_is_one_line_and_exit_2(native_ssp, tmp_path, command, o
         assert message in line and "Errno" not in line, line
         assert os.listdir(ro) == []
     assert os.listdir(cwd) == []
+
+
+def test_a_csv_whose_rename_fails_is_kept_as_partial(tmp_path, monkeypatch):
+    """The rows are whole when the CSV is renamed into place: a failed rename keeps them under
+    <name>.partial and says so (on main the temporary file was removed: every row lost)."""
+    import errno
+
+    import numpy as np
+
+    from impedance_cosim.cosim.results import CsvStream
+    from impedance_cosim.util import atomic
+
+    real = atomic.replace
+
+    def refuse_the_target(tmp, target):
+        if Path(target).name == "r.csv":
+            raise OSError(errno.EIO, "Input/output error")
+        real(tmp, target)
+
+    monkeypatch.setattr(atomic, "replace", refuse_the_target)
+    stream = CsvStream(tmp_path / "r.csv")
+    stream.write(["time", "x"], np.array([[0.0, 1.0], [0.5, 2.0]]))
+    with pytest.raises(atomic.WriteError) as err:
+        stream.close()
+    partial = tmp_path / "r.csv.partial"
+    assert str(err.value) == (f"cannot write r.csv in {tmp_path}: Input/output error; the 2 rows"
+                              f" are in {partial}")  # fmt: skip
+    assert partial.read_text().splitlines() == ["time,x", "0.0,1.0", "0.5,2.0"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv.partial"]

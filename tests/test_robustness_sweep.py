@@ -513,9 +513,18 @@ BAD = [
     (["--grid", "=1,2"], "--grid expects component.variable=values"),
     (["--grid", "plant.m3"], "--grid expects component.variable=values"),
     (["--grid", "plant.m3=,,"], "empty grid for plant.m3"),
+    (["--grid", "controller.K=1,,2"], "--grid controller.K=1,,2: value 2 of 3 is empty"),
+    (["--grid", "controller.K=1,2,"], "--grid controller.K=1,2,: value 3 of 3 is empty"),
     (["--grid", "nope.x=1"], "unknown parameter 'nope.x'"),
     (["--set", "plant.m3=nan"], "plant.m3: nan is not a finite number"),
     (["--set", "controller.K=1e400"], "controller.K: inf is not a finite number"),
+    (["--set", "controller.K=5"], "--set controller.K=5: controller.K is swept by --grid"),
+    (["--set", "controller.K2=5"], "--set controller.K2=5: controller.K2 is swept by --grid"),
+    (["--set", "controller.K=abc"], "--set: variable controller.K1: 'abc' is not a valid Real"),
+    (
+        ["--grid", "system.friction_scale=1,2", "--set", "plant.f2=3"],
+        "plant.f2 is swept by --grid system.friction_scale",
+    ),
     (["--random", "0"], "--random must be 1..100000"),
     (["--random", "1000000000"], "--random must be 1..100000"),
     (["--workers", "0"], "--workers must be >= 1"),
@@ -643,3 +652,12 @@ def test_the_test_session_leaves_without_the_fmu_destructors(tmp_path, outcome):
                           cwd=tmp_path, timeout=300)  # fmt: skip
     assert done.returncode == (0 if outcome == "passed" else 1), done.stdout + done.stderr
     assert f"1 {outcome}" in done.stdout
+
+
+def test_set_may_give_what_the_grid_does_not_sweep(native_ssp):
+    """controller.K1 swept, controller.K2 fixed: different parameters, both applied."""
+    from impedance_cosim.apps.sweep.plan import master_arguments, plan_sweep
+
+    plan = plan_sweep(["controller.K1=10,20"], ssp=native_ssp, fixed=["controller.K2=7"])
+    overrides = master_arguments(plan.points[1], plan.options)["overrides"]
+    assert overrides == {"controller.K1": 20, "controller.K2": 7}

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from impedance_cosim.cosim import ssd
+from impedance_cosim.cosim.master import Master, MasterError
 from impedance_cosim.cosim.ssp import Limits, SspError, SystemDescription, read_ssp
 
 SSD = "SystemStructure.ssd"
@@ -347,7 +348,7 @@ EXPERIMENT = b'<ssd:DefaultExperiment startTime="0.0" stopTime="20.0">'
             COMPONENT,
             b'<ssd:Component name="controller" source="resources/PumaPlant.fmu"',
             "component 'controller' is declared twice",
-        ),  # fmt: skip
+        ),
         (CONNECTION, b"<ssd:Connection", "connections to the system's own connectors"),
         (b'startConnector="', b'startConnectorX="', "malformed SSD"),
         (EXPERIMENT, b'<ssd:DefaultExperiment startTime="0.0" stopTime="soon">', "malformed SSD"),
@@ -355,12 +356,12 @@ EXPERIMENT = b'<ssd:DefaultExperiment startTime="0.0" stopTime="20.0">'
             EXPERIMENT,
             b'<ssd:DefaultExperiment startTime="0.0" stopTime="INF">',
             "stopTime: 'INF' is not a finite number",
-        ),  # fmt: skip
+        ),
         (
             EXPERIMENT,
             b'<ssd:DefaultExperiment startTime="NaN" stopTime="20">',
             "startTime: 'NaN' is not a finite number",
-        ),  # fmt: skip
+        ),
         (EXPERIMENT, b'<ssd:DefaultExperiment startTime="5" stopTime="1">', "not after startTime"),
         (b'stepSize="0.0025"', b'stepSize="fast"', "stepSize: 'fast' is not a number"),
         (b'stepSize="0.0025"', b'stepSize="-1e-3"', "stepSize: -0.001 is not positive"),
@@ -370,7 +371,7 @@ EXPERIMENT = b'<ssd:DefaultExperiment startTime="0.0" stopTime="20.0">'
             b"<?xml version='1.0' encoding='UTF-8'?>",
             b'<?xml version="1.0"?><!DOCTYPE x [<!ENTITY e SYSTEM "file:///etc/passwd">]>',
             "DOCTYPE",
-        ),  # fmt: skip
+        ),
         (b'name="plant"', 'name="pl\xe4nt"'.encode("latin-1"), "not UTF-8"),
         (b"<ssd:Elements>", b"<ssd:Elements", "malformed SSD"),
     ],
@@ -383,6 +384,32 @@ def test_malformed_parameter_set_names_the_file(archive, tmp_path):
     edit = ssd_edit(b'<ssv:Real value="0.65"', b'<ssv:Real value="lots"')
     bad = repack(archive, tmp_path / "bad.ssv.ssp", {"resources/observer_plant.ssv": edit})
     refused(bad, "malformed parameter set in .*resources/observer_plant.ssv")
+
+
+@pytest.mark.parametrize(
+    "old,new,message",
+    [
+        (
+            b'<ssv:Real value="0.65"',
+            b'<ssv:Real value="1e400"',
+            "variable plant.wall_x: '1e400' is out of range",
+        ),
+        (
+            b'<ssv:Parameter name="wall_k"',
+            b'<ssv:Parameter name="wall_kk"',
+            "unknown parameter plant.wall_kk in parameter set 'observer'",
+        ),
+    ],
+)
+def test_a_bad_parameter_value_names_the_archive_and_the_ssv(archive, tmp_path, old, new, message):
+    """Read fine, refused by the master: the line still says which archive and which .ssv."""
+    edits = {"resources/observer_plant.ssv": ssd_edit(old, new)}
+    bad = repack(archive, tmp_path / "values.ssp", edits)
+    with read_ssp(bad) as system, pytest.raises(MasterError) as err:
+        Master(system, parameter_set="observer")
+    assert str(err.value) == f"{bad}: resources/observer_plant.ssv: {message}" + (
+        " (a 64-bit float is at most 1.798e+308 in magnitude)" if "1e400" in message else ""
+    )
 
 
 def test_cli_gives_one_line_for_each_bad_archive(archive, tmp_path):

@@ -146,13 +146,18 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
                    help="no progress (a bar on a terminal, else a line every 10 s)")  # fmt: skip
 
 
-def output_every(interval: float | None, step: float) -> int:
+def output_every(interval: float | None, step: float, steps: int | None = None) -> int:
     """Rows per written row for --output-interval (1 without it); CliError unless the interval
-    is a whole multiple of the communication step."""
+    is a whole multiple of the communication step and, given the run's number of steps, divides
+    the run length (else the last row, at the stop time, would not be written)."""
     if interval is None:
         return 1
     every = round(interval / step)
     if every < 1 or abs(every * step - interval) > 1e-9 * max(interval, step):
         raise CliError(f"--output-interval {interval:g} s is not a multiple of the step"
                        f" {step:g} s (e.g. {step:g}, {2 * step:g}, {4 * step:g})")  # fmt: skip
+    if steps is not None and steps % every:
+        raise CliError(f"--output-interval {interval:g} s does not divide the run length"
+                       f" {steps * step:g} s (--stop): the row at the stop time would be"
+                       " lost")  # fmt: skip
     return every

@@ -12,6 +12,7 @@ import argparse
 import contextlib
 import io
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -86,8 +87,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 0
     pair = [] if args.no_figures else ["observer", "difference"]
     for scenario in [args.scenario, *(s for s in pair if s in system.parameter_sets)]:
-        step = _master(args, system, overrides, scenario, args.algorithm).step_size
-        args.output_every = output_every(getattr(args, "output_interval", None), step)
+        master = _master(args, system, overrides, scenario, args.algorithm)
+        steps = round((master.stop_time - master.start_time) / master.step_size)
+        interval = getattr(args, "output_interval", None)
+        args.output_every = output_every(interval, master.step_size, steps)
     with FolderLock(prepare_out(out), "--out"):
         return _run_scenarios(args, ssp, overrides, out)
 
@@ -118,9 +121,6 @@ def _master(
 def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Path) -> int:
     """The chosen scenario (CSV as it runs, summary, figures) and, for Fig. 4, its pair; 1 when
     any of them failed."""
-    from impedance_cosim.util.atomic import WriteError
-    from impedance_cosim.util.interrupt import RunInterrupted
-
     system = args.system
     progress = not args.no_progress  # a bar on a terminal, plain periodic lines otherwise
     runs: list[dict] = []  # provenance of each run, written to run.json on every exit path
@@ -132,33 +132,16 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
         stem = master.parameter_set or "run"
         fmt, every = getattr(args, "result_format", "csv"), getattr(args, "output_every", 1)
         path = out / (f"{stem}-{master.algorithm}.{fmt}" if role else f"{stem}.{fmt}")
-        stderr, fmu_output = sys.stderr, io.StringIO()
         stream = results_stream(path, fmt, every, master)
-        with stream as csv, contextlib.redirect_stderr(fmu_output):
-            try:
-                result = master.run(progress=progress and stderr, sink=csv.write)
-            except RunInterrupted as exc:
-                exc.message += f"; {csv.rows} rows kept in {path}"
-                entry = provenance.run_entry(master, None, overrides, path, "interrupted")
-                runs.append({**entry, "rows": csv.rows, "error": exc.message})
-                written.append(path)
-                raise
-            except WriteError as exc:  # e.g. a full disk: what it kept is in the message
-                entry = provenance.run_entry(master, None, overrides, path, "failed")
-                runs.append({**entry, "rows": csv.rows, "error": str(exc)})
-                raise
-            finally:
-                echo_fmu_output(fmu_output.getvalue(), stderr)
-        written.append(path)
-        runs.append(provenance.run_entry(master, result, overrides, path if fmt == "csv" else None))
-        runs[-1]["results"] = {"file": path.name, "format": fmt, "rows": csv.rows,
+        result = _run_into(master, stream, path, progress, overrides, runs, written)
+        runs[-1]["results"] = {"file": path.name, "format": fmt, "rows": stream.rows,
                                "output_interval_s": every * master.step_size}  # fmt: skip
         if role:
             runs[-1]["role"] = role
         span = result.data[-1, 0] - result.data[0, 0] if len(result.data) else 0.0
         rtf = span / max(result.wall_time, 1e-9)
         status = {"ok": "ok", "diverged": str(result.divergence)}.get(result.status, "FAILED")
-        rows = f"{len(result.data)} rows" + (f", {csv.rows} written" if every > 1 else "")
+        rows = f"{len(result.data)} rows" + (f", {stream.rows} written" if every > 1 else "")
         print(f"{stem}{f' ({role})' if role else ''}: {status}, {rows} -> {path} "
               f"({result.wall_time:.2f} s wall, {rtf:.1f}x real time)")  # fmt: skip
         if result.status == "failed":
@@ -185,6 +168,40 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
 
             if page := report.write_run_report(out, record, figures, sys.exc_info()[1]):
                 print(f"report: {page}")
+
+
+def _run_into(master, stream, path: Path, progress: bool, overrides: dict, runs: list,
+              written: list):  # fmt: skip
+    """Run the master into the results stream and close it; its entry goes to `runs` on every
+    exit path (interrupted or failed, also while the file is written at the end)."""
+    from impedance_cosim.util.atomic import WriteError
+    from impedance_cosim.util.interrupt import RunInterrupted, signal_name
+
+    stderr, fmu_output, result = sys.stderr, io.StringIO(), None
+    try:
+        with stream, contextlib.redirect_stderr(fmu_output):
+            try:
+                result = master.run(progress=progress and stderr, sink=stream.write)
+            except RunInterrupted as exc:
+                exc.message += f"; {stream.rows} rows kept in {path}"
+                raise
+            finally:
+                echo_fmu_output(fmu_output.getvalue(), stderr)
+    except (KeyboardInterrupt, WriteError) as exc:  # e.g. a full disk: the message says where
+        if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, RunInterrupted):
+            signum = getattr(exc, "signum", signal.SIGINT)  # while the file was closed
+            message = f"interrupted ({signal_name(signum)}); {stream.rows} rows kept in {path}"
+            exc = RunInterrupted(message, signum)
+        status = "interrupted" if isinstance(exc, RunInterrupted) else "failed"
+        entry = provenance.run_entry(master, result, overrides, path, status)
+        message = exc.message if isinstance(exc, RunInterrupted) else str(exc)
+        runs.append({"rows": stream.rows, **entry, "error": message})
+        written.append(path)
+        raise exc from None
+    written.append(path)
+    fmt = "csv" if path.suffix == ".csv" else "mat"
+    runs.append(provenance.run_entry(master, result, overrides, path if fmt == "csv" else None))
+    return result
 
 
 FIG4_COMPARISON = "Fig. 4 comparison"  # the role of the runs under the paper's condition

@@ -7,10 +7,12 @@ padded), `dataInfo` (per variable: its matrix, its column, 0, -1), `data_1` (the
 parameters, constant: their values at the start and the stop time, time first) and `data_2`
 (one row per recorded signal, one column per recorded row, time first): every value the same
 float64 bits as the CSV's. MatStream has CsvStream's interface (the master's sink), and writes
-the file whole when closed, through a temporary file renamed into place."""
+the file whole when closed, through a temporary file renamed into place; when that fails or is
+interrupted, the rows go to `<name>.partial` (as many as fit) and the error says so."""
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -102,13 +104,39 @@ class MatStream:
             self.rows += len(kept)
 
     def close(self) -> None:
-        """Write the file (nothing at all if no header was given)."""
+        """Write the file (nothing at all if no header was given). A failed or interrupted write
+        keeps the rows under <name>.partial (as many as fit) and says so: a WriteError, or a
+        RunInterrupted for Ctrl-C/SIGTERM."""
         if self.names is None:
             return
-        blocks, self._blocks = self._blocks, []
-        data = np.vstack(blocks) if blocks else np.empty((0, len(self.names)))
-        write_mat(self.path, self.names, data, self.descriptions, self.parameters)
-        self.names = None
+        blocks, self._blocks, names, self.names = self._blocks, [], self.names, None
+        data = np.vstack(blocks) if blocks else np.empty((0, len(names)))
+        try:
+            write_mat(self.path, names, data, self.descriptions, self.parameters)
+        except atomic.WriteError as exc:
+            raise exc.with_note(self._keep_partial(names, data)) from None
+        except KeyboardInterrupt as exc:
+            from impedance_cosim.util.interrupt import RunInterrupted, signal_name
+
+            signum = getattr(exc, "signum", signal.SIGINT)
+            kept = self._keep_partial(names, data)
+            raise RunInterrupted(f"interrupted ({signal_name(signum)}) while writing"
+                                 f" {self.path}; {kept}", signum) from None  # fmt: skip
+
+    def _keep_partial(self, names: list[str], data: np.ndarray) -> str:
+        """The rows in <name>.partial (a result file like the whole one): all of them, else the
+        first half, quarter, ... that fit; the note saying where they are."""
+        partial = self.path.with_name(self.path.name + ".partial")
+        n = len(data)
+        while n:
+            try:
+                write_mat(partial, names, data[:n], self.descriptions, self.parameters)
+            except atomic.WriteError:
+                n //= 2
+                continue
+            which = f"the {n} rows" if n == len(data) else f"the first {n} of the {len(data)} rows"
+            return f"{which} (to t={data[n - 1, 0]:.9g} s) are in {partial}"
+        return f"the {len(data)} rows computed could not be kept"
 
     def __enter__(self) -> MatStream:
         return self

@@ -238,9 +238,22 @@ class CsvStream:
             return
         try:
             atomic.replace(tmp, self.path)
-        except OSError as exc:
-            atomic.discard(tmp)
-            raise atomic.write_error(self.path, exc) from None
+        except OSError as exc:  # the rows are whole: kept under <name>.partial
+            if not self.keep_partial:
+                atomic.discard(tmp)
+                raise atomic.write_error(self.path, exc) from None
+            partial = self.path.with_name(self.path.name + ".partial")
+            try:
+                atomic.replace(tmp, partial)
+            except OSError:
+                atomic.keep(tmp)
+                partial = tmp
+            note = f"the {self.rows} rows are in {partial}"
+            raise atomic.write_error(self.path, exc, note) from None
+        except KeyboardInterrupt:  # the rows are whole: in place first, then stop
+            if tmp.exists():
+                atomic.replace(tmp, self.path)
+            raise
 
     def __enter__(self) -> CsvStream:
         return self

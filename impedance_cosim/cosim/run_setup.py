@@ -23,6 +23,10 @@ class MasterError(RuntimeError):
     """The system cannot be run as configured (bad parameter name, missing connector...)."""
 
 
+class NoStepError(MasterError, ValueError):
+    """A stop time that gives no communication step at all (also a ValueError: a bad argument)."""
+
+
 def split_name(name: str) -> tuple[str, str]:
     """ "component.variable" -> (component, variable), with a clear error."""
     if "." not in name:
@@ -75,6 +79,9 @@ def step_count(start_time: float, stop_time: float | None, step_size: float | No
             f"the run length {stop_time - start_time:g} s is not a whole number of"
             f" {step_size:g} s steps"
         )
+    if round(steps) < 1:  # e.g. 1e-300 s: no step at all, so no result to speak of
+        raise NoStepError(f"the run length {stop_time - start_time:g} s is shorter than one"
+                          f" {step_size:g} s step")  # fmt: skip
     return steps
 
 
@@ -117,10 +124,13 @@ def collect_parameters(
     values: dict[str, dict[str, Any]] = {name: {} for name in fmu_files}
     for p in system.parameter_sets.get(parameter_set, []):
         comp, var = split_name(p.name)
-        v = _parameter_variable(variables, comp, var, f"in parameter set {parameter_set!r}")
-        if p.unit and v.unit and p.unit != v.unit:
-            raise MasterError(f"parameter {p.name}: unit {p.unit} but the FMU's is {v.unit}")
-        values[comp][var] = _value(v, p.value, p.name)
+        try:
+            v = _parameter_variable(variables, comp, var, f"in parameter set {parameter_set!r}")
+            if p.unit and v.unit and p.unit != v.unit:
+                raise MasterError(f"parameter {p.name}: unit {p.unit} but the FMU's is {v.unit}")
+            values[comp][var] = _value(v, p.value, p.name)
+        except MasterError as exc:  # named with the archive and its .ssv member
+            raise MasterError(f"{p.origin}: {exc}" if p.origin else str(exc)) from None
     for name, value in overrides.items():
         comp, var = split_name(name)
         targets = [var]

@@ -50,6 +50,8 @@ class Parameter:
     type: str
     value: str
     unit: str | None
+    # where it was read, for messages: "<archive path>: resources/observer_plant.ssv"
+    origin: str = field(default="", compare=False)
 
 
 @dataclass
@@ -179,7 +181,9 @@ def connectors(element: ET.Element, what: str) -> dict[str, Connector]:
     return out
 
 
-def _parameter_set(root: ET.Element, prefix: str, what: str) -> tuple[str, list[Parameter]]:
+def _parameter_set(
+    root: ET.Element, prefix: str, what: str, origin: str = ""
+) -> tuple[str, list[Parameter]]:
     if _local(root.tag) != "ParameterSet":
         raise SspError(f"{what}: expected a ParameterSet, found {_local(root.tag)!r}")
     params = []
@@ -197,7 +201,7 @@ def _parameter_set(root: ET.Element, prefix: str, what: str) -> tuple[str, list[
                 raise SspError(f"{what}: parameter {name!r}: {value!r} is not a number") from None
         elif kind in INTEGERS and not value.strip().lstrip("+-").isdigit():
             raise SspError(f"{what}: parameter {name!r}: {value!r} is not an integer")
-        params.append(Parameter(prefix + name, kind, value, t.get("unit")))
+        params.append(Parameter(prefix + name, kind, value, t.get("unit"), origin or what))
     return root.get("name") or "", params
 
 
@@ -210,6 +214,7 @@ class Source:
     where: str
     limits: Limits
     xml_left: int = 0  # bytes of parameter-set XML still allowed (bounds the work per archive)
+    path: str = ""  # the archive as given (where is its name), for the parameters' origin
 
 
 def bindings(
@@ -237,7 +242,8 @@ def bindings(
                 src.archive, info, src.where, "SystemStructureParameterValues.xsd", src.limits
             )
             here = f"{src.where}: {name}"
-            sets.append((*_parameter_set(root, pfx, here), here))
+            origin = f"{src.path or src.where}: {name}"  # the path the user gave
+            sets.append((*_parameter_set(root, pfx, here, origin), here))
         for inline in b.findall("ssd:ParameterValues/ssv:ParameterSet", NS):
             sets.append((*_parameter_set(inline, pfx, what), what))
     return sets

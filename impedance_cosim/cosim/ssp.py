@@ -107,7 +107,7 @@ def _read(path: Path, folder: Path, limits: Limits, ssd: str | None) -> SystemDe
             raise SspError(f"{where} has no system description {ssd!r} (have {[SSD, *variants]})")
         infos = {f.filename: f for f in files}
         extract(archive, files, folder, where, limits)
-        src = Source(archive, infos, where, limits, xml_left=4 * limits.xml_bytes)
+        src = Source(archive, infos, where, limits, xml_left=4 * limits.xml_bytes, path=str(path))
         names_read = (
             [ssd] if ssd is not None else [SSD, *sorted(n for n in names if _is_variant(n))]
         )

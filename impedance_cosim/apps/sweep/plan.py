@@ -136,10 +136,13 @@ def parse_axis(item: str, max_count: int = MAX_RUNS) -> tuple[str, Any]:
             raise SweepError(f"{name}: log spacing needs positive bounds (got {spec!r})")
         grid = np.geomspace(a, b, n) if kind == "log" else np.linspace(a, b, n)
         return name, [float(v) for v in grid]
-    values = [parse_value(v) for v in spec.split(",") if v.strip()]
-    if not values:
+    items = spec.split(",")
+    if not any(v.strip() for v in items):
         raise SweepError(f"empty grid for {name}: give at least one value ({name}=v1,v2,...)")
-    return name, values
+    empty = next((i for i, v in enumerate(items, start=1) if not v.strip()), None)
+    if empty is not None:
+        raise SweepError(f"--grid {item.strip()}: value {empty} of {len(items)} is empty")
+    return name, [parse_value(v) for v in items]
 
 
 def known_parameters(system) -> dict[str, str]:
@@ -232,6 +235,41 @@ def master_arguments(point: Mapping[str, Any], options: Mapping[str, Any]) -> di
     return args
 
 
+# the parameters a system.* name sets besides itself (a run sets them from its value)
+SETS_ALSO = {
+    "system.rate": ("controller.sample_period",),
+    "system.friction_scale": ("plant.f1", "plant.f2", "plant.f3"),
+    "system.encoder_bits": ("plant.q_quant",),
+}
+
+
+def _set_by(name: str, known: Mapping[str, str]) -> set[str]:
+    """The parameters a sweep name sets: a group its members ("controller.K" sets K1..K3), a
+    system.* name what it derives ("system.friction_scale" sets plant.f1..3)."""
+    members = set()
+    for n in (name, *SETS_ALSO.get(name, ())):
+        group = {f"{n}{sep}{i}" for sep in ("", "_") for i in (1, 2, 3)} & set(known)
+        members |= group or {n}
+    return members
+
+
+def _check_fixed(system, options: Mapping[str, Any], axes: Mapping[str, Any], known) -> None:
+    """--set values: each valid (checked as a run would set them, even for a swept name) and
+    none setting what the grid sweeps (the run's value would silently win); SweepError."""
+    fixed = options["fixed"]
+    if not fixed:
+        return
+    try:  # the SSD's stop time and step: only what --set gives is checked here
+        Master(system, **master_arguments({}, {**options, "stop": None, "step": None}))
+    except (MasterError, ValueError) as exc:
+        raise SweepError(f"--set: {exc}") from None
+    for name in fixed:
+        swept = [a for a in axes if _set_by(a, known) & _set_by(name, known)]
+        if swept:
+            raise SweepError(f"--set {name}={fixed[name]}: {name} is swept by --grid"
+                             f" {swept[0]}=...; give it in one place")  # fmt: skip
+
+
 def plan_sweep(
     grid: Sequence[str] = (),
     *,
@@ -318,6 +356,7 @@ def plan_sweep(
         "fixed": fixed_values,
         "plant_friction": friction,
     }
+    _check_fixed(system, options, axes, known)
     for i, point in enumerate(points):
         where = ", ".join(f"{k}={v}" for k, v in point.items())
         try:

@@ -13,9 +13,16 @@ SUFFIXES = (".fmu", ".ssp")
 ROBOT = "robot"  # the arm's URDF and MJCF (small text files)
 # What a complete build has (build_all with a C compiler): without them the wheel is refused.
 REQUIRED = ("PaperScenario.ssp", "PaperScenario-native.ssp", "native/PumaPlant.fmu", "fmi3")
-# The sources the archives are built from (run.stale checks the Python ones, this also the C).
-SOURCES = ("impedance_cosim", "plant_model", "controller_model", "bridge_model", "native", "ssp")
+# What the archives are built from (a superset of what run.stale checks: also the C sources and
+# the whole build code); the commands (apps) are not in the FMUs.
+SOURCES = (
+    *(f"impedance_cosim/{name}" for name in ("__init__.py", "version.py", "physics", "fmi")),
+    *(f"impedance_cosim/cosim/{name}" for name in ("system.py", "system2.py")),
+    "impedance_cosim/packaging",
+    *("plant_model", "controller_model", "bridge_model", "native", "ssp"),
+)
 SOURCE_SUFFIXES = (".py", ".c", ".h", ".ssd", ".ssv")
+THIS = Path(__file__).name  # this file decides what goes into the wheel, not what is built
 
 
 class NotBuiltError(Exception):
@@ -47,8 +54,11 @@ def check_built(folder: Path, repo: Path) -> list[str]:
     files = archive_files(folder)
     oldest = min((folder / name).stat().st_mtime for name in files)
     for source in SOURCES:
-        for path in (Path(repo) / source).rglob("*"):
-            if path.suffix in SOURCE_SUFFIXES and path.stat().st_mtime > oldest:
+        top = Path(repo) / source
+        for path in [top] if top.is_file() else top.rglob("*"):
+            if path.name == THIS or path.suffix not in SOURCE_SUFFIXES:
+                continue
+            if path.stat().st_mtime > oldest:
                 raise NotBuiltError(f"{folder} is older than {path}: {hint}")
     return files
 

@@ -5,6 +5,8 @@ compiler, it runs the paper's scenario from its packaged FMUs, and `impedance-co
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -81,7 +83,10 @@ def test_the_installed_wheel_runs_without_a_compiler(tmp_path: Path) -> None:
     done = _run([cli, "run", "--stop", "2", "--out", tmp_path / "out", "--no-progress"],
                 env=env, cwd=work)  # fmt: skip
     assert "building" not in done.stderr, done.stderr  # nothing built: the packaged archive ran
-    assert (tmp_path / "out" / "summary.json").is_file() or list((tmp_path / "out").glob("*.csv"))
+    system = json.loads((tmp_path / "out" / "run.json").read_text())["system"]
+    assert system["ssp"].startswith(str(venv)), system  # the installed package's archive
+    assert system["ssp"].endswith("/impedance_cosim/_fmus/PaperScenario.ssp"), system
+    assert system["sha256"] == hashlib.sha256(packaged["PaperScenario.ssp"]).hexdigest()
     assert not (work / "fmus").exists()
 
     listed = _run([cli, "fmus"], env=env, cwd=work).stdout.splitlines()

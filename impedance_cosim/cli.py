@@ -39,6 +39,8 @@ COMMANDS = {
                   "impedance_cosim.apps.stability.command:add_parser"),
     "swap": ("run the system with a component replaced by another FMU (checked first)",
              "impedance_cosim.apps.hil:add_parsers"),
+    "fmus": ("list the packaged FMUs and system archives, or copy them (--copy-to DIR)",
+             "impedance_cosim.apps.fmus_cmd:add_parser"),
     "robot": ("the stand-in for the robot hardware: the plant model behind the bridge protocol",
               "impedance_cosim.apps.hil:add_parsers"),
 }  # fmt: skip

@@ -9,7 +9,14 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-DEFAULT_SSP = REPO / "fmus" / "PaperScenario.ssp"
+# The FMUs and system archives an installed wheel carries (setup.py copies the built fmus/ there);
+# used when there is no checkout's fmus/ beside the package (an install, not a clone), and never
+# rebuilt: a clone keeps building its own fmus/ when stale.
+PACKAGED_FMUS = Path(__file__).resolve().parents[1] / "_fmus"
+FMUS_DIR = (
+    PACKAGED_FMUS if not (REPO / "fmus").is_dir() and PACKAGED_FMUS.is_dir() else REPO / "fmus"
+)
+DEFAULT_SSP = FMUS_DIR / "PaperScenario.ssp"
 
 
 class CliError(Exception):

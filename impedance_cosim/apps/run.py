@@ -19,6 +19,7 @@ from pathlib import Path
 
 from impedance_cosim.apps.options import (
     DEFAULT_SSP,
+    PACKAGED_FMUS,
     REPO,
     check_out,
     output_every,
@@ -59,8 +60,9 @@ def stale(target: Path) -> bool:
 
 
 def ensure_built(args: argparse.Namespace, ssp: Path) -> None:
-    """Build the default system archive (and its FMUs) when no --ssp was given and it is stale."""
-    if not args.ssp and stale(ssp):
+    """Build the default system archive (and its FMUs) when no --ssp was given and it is stale;
+    the ones an installed wheel carries (PACKAGED_FMUS) are used as they are."""
+    if not args.ssp and ssp.parent != PACKAGED_FMUS and stale(ssp):
         from impedance_cosim.util.atomic import FolderLock
 
         with FolderLock(prepare_out(ssp.parent), "build folder", wait=BUILD_WAIT_S):

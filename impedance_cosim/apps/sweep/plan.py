@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.apps.options import REPO
+from impedance_cosim.apps.options import FMUS_DIR, PACKAGED_FMUS, REPO  # noqa: F401 (sweep's)
 from impedance_cosim.cosim.master import ALGORITHMS, Master, MasterError
 
-DEFAULT_SSP = REPO / "fmus" / "PaperScenario-native.ssp"
+DEFAULT_SSP = FMUS_DIR / "PaperScenario-native.ssp"
 
 SYSTEM_PARAMETERS = {
     "system.rate": "sample rate [Hz]: master step = controller.sample_period = 1/rate",
@@ -376,7 +376,7 @@ def default_ssp() -> Path:
     """The native system archive, built first if missing or older than its sources."""
     from impedance_cosim.apps.run import stale
 
-    if stale(DEFAULT_SSP):
+    if DEFAULT_SSP.parent != PACKAGED_FMUS and stale(DEFAULT_SSP):  # an install's: as shipped
         from impedance_cosim.packaging.build_all import build_all
 
         print("building the FMUs and the system archives ...", file=sys.stderr)

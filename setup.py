@@ -1,0 +1,46 @@
+"""The wheel carries the built FMUs and system archives (what `impedance-cosim build` writes into
+fmus/) as package data in impedance_cosim/_fmus, so that an installed wheel runs the paper's
+scenario without a C compiler (docs/fmus.md#installing-the-fmus-from-a-wheel). They are copied,
+not built, here: build them first (`impedance-cosim build`); IMPCOSIM_WHEEL_FMUS names another
+build folder. Everything else is in pyproject.toml."""
+
+import importlib.util
+import os
+import shutil
+from pathlib import Path
+
+from setuptools import setup
+from setuptools.command.build_py import build_py
+
+HERE = Path(__file__).resolve().parent
+
+
+def _wheel_fmus():
+    """impedance_cosim/packaging/wheel_fmus.py, loaded by path (standard library only)."""
+    path = HERE / "impedance_cosim" / "packaging" / "wheel_fmus.py"
+    spec = importlib.util.spec_from_file_location("_impcosim_wheel_fmus", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+class BuildPyWithFmus(build_py):
+    """build_py, then the built FMUs and archives into the build's impedance_cosim/_fmus."""
+
+    def run(self):
+        super().run()
+        if self.editable_mode:  # `pip install -e .`: a clone uses its own fmus/
+            return
+        wheel_fmus = _wheel_fmus()
+        src = Path(os.environ.get("IMPCOSIM_WHEEL_FMUS") or HERE / "fmus").resolve()
+        try:
+            names = wheel_fmus.check_built(src, HERE)
+        except wheel_fmus.NotBuiltError as exc:
+            raise SystemExit(f"error: the wheel carries the built FMUs: {exc}") from None
+        dst = Path(self.build_lib) / "impedance_cosim" / "_fmus"
+        shutil.rmtree(dst, ignore_errors=True)  # nothing left from an earlier build
+        wheel_fmus.copy_files(src, dst, names)
+        print(f"copied {len(names)} FMUs and archives from {src} into {dst}")
+
+
+setup(cmdclass={"build_py": BuildPyWithFmus})

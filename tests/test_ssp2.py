@@ -243,6 +243,7 @@ def test_an_implementation_the_master_cannot_honour_is_refused(editions, tmp_pat
 
 
 @pytest.mark.parametrize("schema", ["with schema", "without schema"])
+@pytest.mark.slow
 def test_fuzz_mutated_2_0_archives_end_in_a_description_or_an_ssp_error(
     editions, tmp_path, monkeypatch, schema
 ):
@@ -275,3 +276,26 @@ def test_fuzz_mutated_2_0_archives_end_in_a_description_or_an_ssp_error(
             failures.append((case, traceback.format_exc(limit=3)))
     assert not failures, failures[:3]
     assert outcomes["ok"] >= 3 and outcomes["SspError"] > 100, outcomes
+
+
+def test_a_clock_connector_of_another_interval_variability_than_the_fmus_is_refused(
+    editions, tmp_path
+):
+    """A Clock connector (every end of its connections alike) that says `tunable` where the
+    FMU's clock is `fixed`: the master names the connector and both values."""
+    from impedance_cosim.cosim.run_setup import MasterError
+
+    out = tmp_path / "tunable.ssp"
+    fixed, tunable = b'intervalVariability="fixed"', b'intervalVariability="tunable"'
+    with zipfile.ZipFile(editions[1]) as zin, zipfile.ZipFile(out, "w") as z:
+        for info in zin.infolist():
+            data = zin.read(info)
+            if info.filename.endswith(".ssd"):
+                assert fixed in data
+                data = data.replace(fixed, tunable)
+            z.writestr(info.filename, data)
+    with read_ssp(out) as system, pytest.raises(MasterError) as err:
+        Master(system, stop_time=0.1)
+    assert "controller.sample_clock: intervalVariability fixed in the FMU, tunable in the SSD" in (
+        str(err.value)
+    )

@@ -60,6 +60,10 @@ def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list
             problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
         if c.type in REALS and (v.unit or None) != (c.unit or None):
             problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
+        fmu_interval = getattr(v, "intervalVariability", None)
+        if c.type == "Clock" and c.interval != fmu_interval:  # SSP 2.0 ssc:Clock
+            problems.append(f"{where}: intervalVariability {fmu_interval} in the FMU,"
+                            f" {c.interval} in the SSD")  # fmt: skip
     return problems
 
 

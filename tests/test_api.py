@@ -93,6 +93,7 @@ def test_to_dataframe_without_pandas(k80, monkeypatch):
         k80.to_dataframe()
 
 
+@pytest.mark.slow
 def test_a_failed_run_keeps_its_rows(ssp_path, capfd):
     r = ic.simulate(ssp=ssp_path, stop_time=0.5, overrides={"controller.G": 1e9})
     assert not r.ok and "plant" in r.error
@@ -169,6 +170,7 @@ def test_another_fmu_in_place_of_a_component(ssp_path, native_dir, k80):
     assert "fmu_files={'plant': " in r.provenance["call"]
 
 
+@pytest.mark.slow
 def test_figure_1_is_a_figure(k80, tmp_path):
     fig = k80.figure_1(tmp_path / "fig1.png")
     assert len(fig.axes) == 4 and fig.axes[3].get_ylabel() == "force [N]"
@@ -223,6 +225,7 @@ def contact(ssp_path):
     return ic.simulate(ssp=ssp_path, stop_time=4.5)
 
 
+@pytest.mark.slow
 def test_report_is_the_cli_page_for_a_result(contact, ssp_path, tmp_path):
     assert contact.ok
     path = contact.report(tmp_path / "contact.html")
@@ -259,6 +262,7 @@ def test_report_is_the_cli_page_for_a_result(contact, ssp_path, tmp_path):
         assert page.row(name) == [name, contact.units[name]]
 
 
+@pytest.mark.slow
 def test_report_of_a_failed_result_says_so(ssp_path, tmp_path):
     r = ic.simulate(ssp=ssp_path, stop_time=0.5, overrides={"controller.G": 1e9})
     page = check_page(r.report(tmp_path / "failed.html"))
@@ -270,6 +274,7 @@ def test_report_of_a_failed_result_says_so(ssp_path, tmp_path):
     assert page.row("gains")[3].startswith("K = 50; G = 1e+09") and "NOT the paper" in text
 
 
+@pytest.mark.slow
 def test_report_that_cannot_be_written_is_one_line(contact, tmp_path):
     for path in (tmp_path / "no" / "such" / "folder" / "r.html", tmp_path):
         with pytest.raises(OSError, match="could not write") as excinfo:

@@ -109,6 +109,7 @@ def swap(native_ssp: Path, fmu: Path, out: Path) -> tuple[int, list[str]]:
     return done.returncode, done.stderr.strip().splitlines()
 
 
+@pytest.mark.slow
 def test_an_honest_bomb_is_refused_from_its_header_wherever_the_fmu_comes_from(
     native_dir, native_ssp, tmp_path, private_tmp
 ):
@@ -134,6 +135,7 @@ def test_an_honest_bomb_is_refused_from_its_header_wherever_the_fmu_comes_from(
     assert bytes_under(private_tmp) < 4 << 20
 
 
+@pytest.mark.slow
 def test_honest_members_adding_up_beyond_the_total_are_refused(native_dir, native_ssp, tmp_path):
     stream, crc = deflated_zeros(200)
     big = {f"resources/big{i}.bin": (stream, crc, 200 << 20) for i in range(6)}
@@ -145,6 +147,7 @@ def test_honest_members_adding_up_beyond_the_total_are_refused(native_dir, nativ
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_a_lying_header_is_caught_from_the_bytes_unpacked(
     native_dir, native_ssp, tmp_path, private_tmp
 ):
@@ -203,6 +206,7 @@ def _member(name: str, attr: int = 0):
     ],
     ids=["members", "description", "absolute", "dotdot", "link"],
 )
+@pytest.mark.slow
 def test_members_names_and_links_are_checked_before_anything_runs(
     make, message, native_dir, native_ssp, tmp_path
 ):

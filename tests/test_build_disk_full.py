@@ -54,6 +54,7 @@ def one_error(done: subprocess.CompletedProcess, command: str) -> str:
     return lines[-1]
 
 
+@pytest.mark.slow
 def test_build_onto_a_full_disk_leaves_no_archive(full_disk):
     out = full_disk / "fmus"
     done = subprocess.run([*CLI, "build", "--out", str(out)], capture_output=True, text=True,
@@ -66,6 +67,7 @@ def test_build_onto_a_full_disk_leaves_no_archive(full_disk):
     assert leftovers(full_disk) == []
 
 
+@pytest.mark.slow
 def test_dist_onto_a_full_disk_leaves_no_bundle(full_disk, tmp_path):
     argv = [*CLI, "dist", "--out", str(full_disk / "dist"), "--fmus", str(tmp_path / "fmus")]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=900)

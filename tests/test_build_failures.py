@@ -85,6 +85,7 @@ def test_a_broken_cross_compiler_is_one_note_and_its_platform_skipped(
         assert "linux64" in platforms(fmu) and "aarch64-linux" not in platforms(fmu)
 
 
+@pytest.mark.slow
 def test_the_first_command_runs_with_a_broken_cross_compiler(tmp_path, monkeypatch, capsys):
     """`impedance-cosim run` on a fresh checkout (nothing built yet) builds and runs: exit 0."""
     from impedance_cosim.apps import run
@@ -108,6 +109,7 @@ def test_the_first_command_runs_with_a_broken_cross_compiler(tmp_path, monkeypat
     assert "aarch64-linux" not in platforms(tmp_path / "fmus" / "native" / "PumaPlant.fmu")
 
 
+@pytest.mark.slow
 def test_require_platforms_makes_a_broken_compiler_one_error_and_nothing_built(tmp_path):
     """With IMPCOSIM_REQUIRE_PLATFORMS=1 (CI) the same compiler is one error line, exit 1, and
     the output folder holds no FMU or archive (nothing half-built). Without it, exit 0."""
@@ -132,6 +134,7 @@ def test_require_platforms_makes_a_broken_compiler_one_error_and_nothing_built(t
 
 
 @pytest.mark.parametrize("earlier", [False, True], ids=["new folder", "earlier build there"])
+@pytest.mark.slow
 def test_a_failed_build_leaves_the_folder_as_it_was(tmp_path, monkeypatch, earlier):
     """A failure late in the build (the FMI 3.0 system archive, after its FMUs were written)
     leaves what the folder held before, byte for byte, and no new folder or staging files."""
@@ -157,6 +160,7 @@ def test_a_failed_build_leaves_the_folder_as_it_was(tmp_path, monkeypatch, earli
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.slow
 def test_a_signal_during_a_build_leaves_it_whole_or_not_there(tmp_path, signum):
     """The signal is sent once the build has written its first FMU (into its staging folder);
     wherever it lands, the folder ends whole (exit 0, every archive) or as it was (exit

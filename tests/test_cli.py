@@ -11,6 +11,7 @@ from fmpy.util import read_csv
 from impedance_cosim.cli import main
 
 
+@pytest.mark.slow
 def test_run_writes_results_summary_and_figures(ssp_path, tmp_path, capsys):
     out = tmp_path / "res"
     code = main(["run", "--ssp", str(ssp_path), "--stop", "4.5", "--out", str(out)])
@@ -76,6 +77,7 @@ def test_malformed_ssd_gives_a_one_line_error(ssp_path, tmp_path, capsys):
     assert "malformed SSD" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_a_command_fails_when_any_of_its_runs_fails(ssp_path, tmp_path, capsys, monkeypatch):
     """`run` with figures also runs the other scenario of Fig. 4: its failure fails the command."""
     from impedance_cosim.cosim.master import Master

@@ -77,6 +77,7 @@ def run(platform: str, fmi: int, folder: Path, tmp_path: Path, request) -> np.nd
 
 @pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+@pytest.mark.slow
 def test_closed_loop_fmu_agrees_with_x86_64_linux(platform, fmi, closed_loops, tmp_path, request):
     need_compiler(platform)
     reference = run("linux64", fmi, closed_loops, tmp_path / "linux64", request)
@@ -91,6 +92,7 @@ def test_closed_loop_fmu_agrees_with_x86_64_linux(platform, fmi, closed_loops, t
 
 @pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("platform", ["linux64", "win64", "aarch64-linux"])
+@pytest.mark.slow
 def test_closed_loop_sources_compile_without_warnings(platform, fmi, closed_loops, tmp_path):
     """sources/ as buildDescription.xml lists them, with -Werror (on Linux also --no-undefined:
     the two parts' renamed model functions and the closed loop's link into one library)."""

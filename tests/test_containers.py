@@ -72,6 +72,7 @@ def test_the_container_lists_the_plant_first(archives):
 
 
 @pytest.mark.parametrize("scenario", list(SCENARIOS))
+@pytest.mark.slow
 def test_sequential_container_equals_our_gauss_seidel_master_in_ssd_order(
     archives, containers, scenario
 ):
@@ -96,6 +97,7 @@ def test_parallel_container_equals_our_jacobi_master(archives, containers, scena
     assert worst(rows, ours)[0] <= TOL, worst(rows, ours)
 
 
+@pytest.mark.slow
 def test_a_jacobi_run_that_diverges_fails_in_the_container_as_in_our_master(archives, containers):
     with pytest.raises(EngineError, match="fmi2DoStep failed"):
         run_container(containers["difference", False], STOP)

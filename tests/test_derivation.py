@@ -7,6 +7,7 @@ import pytest
 from impedance_cosim.packaging import cgen
 
 
+@pytest.mark.slow
 def test_arm_terms_are_up_to_date():
     """impedance_cosim/physics/arm_terms.py and native/src/arm_terms.{c,h} regenerate byte for
     byte from the symbolic derivation (python -m impedance_cosim.physics.derivation)."""
@@ -30,6 +31,7 @@ def _bind(source: str):
     return namespace["bind"]
 
 
+@pytest.mark.slow
 def test_optimized_terms_are_bit_identical_to_per_call_evaluation():
     """The shipped arm_terms.py hoists parameter-only subexpressions into bind() and computes
     repeated values once (bind_source.hoist, reuse). Every term must equal, bit for bit, the

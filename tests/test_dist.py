@@ -67,6 +67,7 @@ def archives(folder: Path) -> dict[str, bytes]:
     }
 
 
+@pytest.mark.slow
 def test_building_twice_gives_identical_bytes(two_builds, fmu_dir: Path, native_dir: Path):
     a, b = two_builds
     first, second = archives(a / "fmus"), archives(b / "fmus")
@@ -81,6 +82,7 @@ def test_building_twice_gives_identical_bytes(two_builds, fmu_dir: Path, native_
         assert data == first[name], f"{name} differs from the session's build"
 
 
+@pytest.mark.slow
 def test_every_member_has_a_fixed_date_and_mode(two_builds):
     a, _ = two_builds
     zips = [*(a / "fmus").rglob("*.fmu"), *(a / "fmus").glob("*.ssp"), a / "dist" / f"{NAME}.zip"]
@@ -95,6 +97,7 @@ def test_every_member_has_a_fixed_date_and_mode(two_builds):
                 assert (mode == 0o755) == info.filename.startswith("binaries/"), info.filename
 
 
+@pytest.mark.slow
 def test_bundle_contents(two_builds):
     a, _ = two_builds
     with zipfile.ZipFile(a / "dist" / f"{NAME}.zip") as z:
@@ -122,6 +125,7 @@ def test_bundle_contents(two_builds):
         assert hashlib.sha256(files[name]).hexdigest() == digest, name
 
 
+@pytest.mark.slow
 def test_bundle_ships_the_robot_files(two_builds):
     """The build writes the arm's URDF and MJCF (the plant's parameters), the same bytes twice,
     and the bundle ships them and lists them in its README."""
@@ -142,6 +146,7 @@ def test_bundle_ships_the_robot_files(two_builds):
             assert f"fmus/{member}" in readme, member
 
 
+@pytest.mark.slow
 def test_incomplete_bundle_refused(tmp_path: Path):
     out = tmp_path / "fmus"
     built = [build_fmu(spec, out) for spec in FMUS.values()] + [build_ssp(out)]  # no native
@@ -150,6 +155,7 @@ def test_incomplete_bundle_refused(tmp_path: Path):
     assert not (tmp_path / "dist" / f"{NAME}.zip").exists()
 
 
+@pytest.mark.slow
 def test_dist_without_a_compiler_says_so(tmp_path: Path, monkeypatch, capsys):
     monkeypatch.setenv("CC", "no-such-compiler-here")
     assert main(["dist", "--out", str(tmp_path / "dist"), "--fmus", str(tmp_path / "fmus")]) == 2

@@ -29,6 +29,7 @@ def test_one_definition_of_a_runs_status_and_the_exit_status():
             ] == [0, 3, 1]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_run_under_jacobi_writes_its_fig4_and_exits_diverged(ssp_path, tmp_path, capsys):
     """`run --algorithm jacobi`: the difference diverges at 0.4825 s; the command writes Fig. 4
     from the rows up to the divergence and exits 3 (not 1), with no error line."""
@@ -67,6 +68,7 @@ def test_a_diverged_main_run_has_its_summary_and_fig4(ssp_path, tmp_path, capsys
     assert f"{DIVERGED} (-1.071e6): the paper's quantities are not measured" in " ".join(page.text)
 
 
+@pytest.mark.slow
 def test_the_default_run_draws_both_conditions_and_exits_ok(ssp_path, tmp_path, capsys):
     """The default run: the pair under sample-and-hold (both bounded) and the paper's pair under
     one sample of delay (the difference diverges) in one Fig. 4; exit 0 (the comparison's
@@ -83,6 +85,7 @@ def test_the_default_run_draws_both_conditions_and_exits_ok(ssp_path, tmp_path, 
     assert (out / "difference-jacobi.csv").is_file()
 
 
+@pytest.mark.slow
 def test_fig4_titles_say_the_condition_and_the_range(ssp_path):
     """Each panel: its condition, the time range it shows, how the run ended."""
     gs = [ic.simulate(s, ssp=ssp_path, stop_time=0.6) for s in ("observer", "difference")]

@@ -219,6 +219,7 @@ def test_system_archives_carry_the_licence_metadata(fmu_dir: Path, native_dir: P
                 assert "2026" in root.get("copyright", ""), name
 
 
+@pytest.mark.slow
 def test_documented_fmpy_commands_run(fmus, tmp_path: Path):
     """The `fmpy simulate` lines index.html gives work as written (shortened to 0.1 s)."""
     import html

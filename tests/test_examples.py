@@ -40,6 +40,7 @@ def test_the_notebook_is_stored_without_outputs():
     assert code and all(c.outputs == [] and c.execution_count is None for c in code)
 
 
+@pytest.mark.slow
 def test_the_notebook_runs(ssp_path, tmp_path, kernel):
     work = tmp_path / "run"
     work.mkdir()

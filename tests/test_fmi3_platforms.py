@@ -70,6 +70,7 @@ def closed_loop(platform: str, fmi3_dir: Path, tmp_path: Path, request) -> np.nd
 
 
 @pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+@pytest.mark.slow
 def test_fmi3_closed_loop_agrees_with_x86_64_linux(platform, fmi3_dir, tmp_path, request):
     need_compiler(platform)
     reference = closed_loop("linux64", fmi3_dir, tmp_path / "x86_64-linux", request)
@@ -84,6 +85,7 @@ def test_fmi3_closed_loop_agrees_with_x86_64_linux(platform, fmi3_dir, tmp_path,
 
 @pytest.mark.parametrize("platform", ["linux64", "win64", "aarch64-linux"])
 @pytest.mark.parametrize("name", [PLANT, CONTROLLER, "ImpedanceControllerClocked.fmu"])
+@pytest.mark.slow
 def test_fmi3_sources_compile_without_warnings_or_undefined_symbols(
     platform, name, fmi3_dir, tmp_path
 ):

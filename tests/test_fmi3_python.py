@@ -43,6 +43,7 @@ def test_python_fmi3_fmu_is_valid_with_the_native_variables(python3_dir, fmi3_di
             w.valueReference, w.type, w.causality, w.unit, str(w.start))  # fmt: skip
 
 
+@pytest.mark.slow
 def test_master_runs_python_fmi3_equal_to_python_fmi2(fmu_dir, python3_dir):
     fmi2 = Master(read_ssp(fmu_dir / "PaperScenario.ssp"), "observer").run()
     files = {"plant": python3_dir / NAMES[0], "controller": python3_dir / NAMES[1]}

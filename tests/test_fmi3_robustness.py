@@ -223,6 +223,7 @@ def test_c_host_runs_fmi3_closed_loop_as_our_master(fmu_dir, fmi3_dir, tmp_path)
 
 
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
+@pytest.mark.slow
 def test_fmi3_no_leaks_under_valgrind(fmi3_dir, tmp_path):
     cmd = ["valgrind", "--leak-check=full", "--errors-for-leak-kinds=all", "--error-exitcode=3",
            str(_host(tmp_path)), *_host_args(fmi3_dir, 1600, tmp_path / "v.csv")]  # fmt: skip

@@ -55,6 +55,7 @@ def test_fmu_is_valid_and_documented(fmu_dir, name):
 
 
 @pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+@pytest.mark.slow
 def test_fmpy_simulate_from_a_shell(fmu_dir, tmp_path, name):
     """`fmpy simulate` runs each FMU's default experiment on its own."""
     out = tmp_path / "out.csv"

@@ -422,6 +422,7 @@ def errors_in(valgrind_log: str, library: str) -> list[str]:
 
 @needs_cc
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
+@pytest.mark.slow
 def test_fuzz_under_valgrind(native_dir, tmp_path, monkeypatch):
     """A short run: no invalid write or free, no use of uninitialised memory and no read of freed
     memory beyond the tag inside the FMU (a freed instance or state is recognised, not used)."""

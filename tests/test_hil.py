@@ -202,6 +202,7 @@ def test_swap_native_and_noisy_plants_give_the_run_format(ssp_path, native_dir, 
 # --- the bridge against the robot process --------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_lockstep_bridge_equals_the_in_process_plant(system, bridge, robot):
     ref = Master(system).run()
     got = bridged(system, bridge, robot(), 20.0)
@@ -241,6 +242,7 @@ GONE = "not reachable"  # a resend after the robot exited: ICMP port unreachable
         ("exit@40", [TIMEOUT, GONE]),  # which one: whether a resend lands after the exit
     ],
 )
+@pytest.mark.slow
 def test_a_failing_link_stops_the_run_cleanly(system, bridge, robot, fault, messages):
     """Each fault fails step 40 (timeout_s 5 s: a slow machine does not fail an earlier one)."""
     result = bridged(system, bridge, robot(f"--fault={fault}"), 1.0,
@@ -323,6 +325,7 @@ def test_realtime_run_is_paced_and_timed(ssp_path, tmp_path, capsys):
     assert (rows["rt.compute_s"][1:] > 0).all()
 
 
+@pytest.mark.slow
 def test_bridge_against_a_realtime_robot(system, bridge, robot):
     port = robot(realtime=True)
     result = bridged(system, bridge, port, 1.0, realtime=True)

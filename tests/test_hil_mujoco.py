@@ -48,6 +48,7 @@ def bridged(system, fmu_dir, port, stop, **kw):
     return Master(system, stop_time=stop, fmu_files=fmu, overrides=overrides, **kw).run()
 
 
+@pytest.mark.slow
 def test_lockstep_bridge_equals_the_mujoco_fmu(system, fmu_dir, robot):
     """Through the first impact (4.5 s): every column of the bridged run equals the run with
     MujocoPlant.fmu in process, bit for bit (the same model, MJCF and calls)."""
@@ -61,6 +62,7 @@ def test_lockstep_bridge_equals_the_mujoco_fmu(system, fmu_dir, robot):
     assert not np.array_equal(got["plant.contact_force"], ours["plant.contact_force"])
 
 
+@pytest.mark.slow
 def test_swap_to_the_mujoco_robot_is_one_command(ssp_path, fmu_dir, tmp_path):
     out = tmp_path / "bridge"
     args = ["--ssp", str(ssp_path), "--stop", "1", "--no-figures", "--no-report", "--no-progress"]

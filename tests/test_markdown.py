@@ -36,7 +36,7 @@ SETUP = [
     r"\. \.venv/bin/activate",
     r"source \.venv/bin/activate",
     r"(python3? -m )?pip install( -q| --quiet)* -e (\.|\"\.\[dev\]\"|'\.\[dev\]')",
-    r"python3? -m pytest",
+    r"python3? -m pytest( .*)?",  # the suite itself, any tier (docs/development.md)
 ]
 EXIT = re.compile(r"#\s*exits (\d+)\b")
 FENCE = re.compile(r"^```(\S*)\s*$")
@@ -192,6 +192,7 @@ def script(block: Block) -> str:
 
 
 @pytest.mark.parametrize("block", SH, ids=[b.id for b in SH])
+@pytest.mark.slow
 def test_shell_block_runs(block: Block, built: Path, tmp_path: Path) -> None:
     """Each command of the block exits with the status the docs give (0 unless `# exits N`)."""
     work = workdir(tmp_path, built)
@@ -202,6 +203,7 @@ def test_shell_block_runs(block: Block, built: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("block", PY, ids=[b.id for b in PY])
+@pytest.mark.slow
 def test_python_block_runs(block: Block, built: Path, tmp_path: Path) -> None:
     """The snippet runs to its end in a fresh folder."""
     p = run([sys.executable, "-c", block.text], workdir(tmp_path, built))

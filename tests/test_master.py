@@ -236,6 +236,7 @@ def test_sampling_is_independent_of_the_master_step(ssp_path):
 
 
 @pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+@pytest.mark.slow
 def test_compiled_loop_equals_the_python_loop(ssp_path, algorithm):
     """native/master/loop.c takes exactly the steps of the Python loop (and keeps the same rows
     when a run diverges)."""

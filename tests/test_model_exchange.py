@@ -286,6 +286,7 @@ def test_held_input_gives_the_new_torque_from_each_step_on(native_dir, paper_tor
     assert all(math.isclose(e, ti) and e < ti for e, ti in zip(events[:-1], t[1:40]))
 
 
+@pytest.mark.slow
 def test_paper_scenario_torques_reproduce_co_simulation(native_dir, paper_torques):
     """The ME plant under CVode, driven by the paper scenario's torques, against the CS plant:
     contact times within 1 ms, joint angles within 1e-5 rad over 20 s. The replay is open loop,

@@ -186,6 +186,7 @@ def read(path: Path) -> dict[str, np.ndarray]:
     return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
 
 
+@pytest.mark.slow
 def test_swap_runs_the_paper_scenario(fmu_dir, ssp_path, tmp_path):
     """`swap --replace plant=MujocoPlant.fmu` runs the 20 s paper scenario (observer): the
     same free motion as PumaPlant before the contact (1e-7 rad), the same contact phases and
@@ -252,6 +253,7 @@ def test_swap_without_mujoco_fails_in_one_line(fmu_dir, ssp_path, tmp_path):
     assert "MujocoPlant needs the Python package mujoco" in errors[-1]
 
 
+@pytest.mark.slow
 def test_default_experiment_runs_alone_as_pumaplants_reference(fmu_dir, tmp_path):
     """`fmpy simulate` on its own (the 20 s default experiment: the arm falls, swings, hangs):
     PumaPlant's reference result (PumaPlant_ref.csv) to 1e-7."""

@@ -132,6 +132,7 @@ def test_c_host_runs_the_closed_loop_without_python(native_dir, tmp_path, both_r
 
 
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
+@pytest.mark.slow
 def test_no_leaks_under_valgrind(native_dir, tmp_path):
     exe = _host(tmp_path)
     cmd = ["valgrind", "--leak-check=full", "--errors-for-leak-kinds=all", "--error-exitcode=3",
@@ -141,6 +142,7 @@ def test_no_leaks_under_valgrind(native_dir, tmp_path):
     assert "All heap blocks were freed" in done.stderr
 
 
+@pytest.mark.slow
 def test_rebuild_from_sources_with_fmpy(native_dir, tmp_path):
     """Tools can rebuild the binary from sources/ (fmpy's compile support, CMake)."""
     pytest.importorskip("cmake")

@@ -410,6 +410,7 @@ def native_error(lib, parameters, steps=()) -> str:
         ({}, [(0.0, math.inf, (0.0, 0.0, 0.0))]),  # an infinite step
     ],
 )
+@pytest.mark.slow
 def test_same_refusals(lib, parameters, steps):
     params = {k: (float(v) if isinstance(v, float) else v) for k, v in parameters.items()}
     steps = [(t, h, tuple(float(v) for v in tau)) for t, h, tau in steps]

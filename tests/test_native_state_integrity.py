@@ -378,6 +378,7 @@ def _platform_state_run(platform: str, native_dir: Path, tmp_path: Path, request
 
 @needs_cc
 @pytest.mark.parametrize("platform", ["linux64", "win64", "aarch64-linux"])
+@pytest.mark.slow
 def test_every_platform_refuses_bad_states_and_reads_the_others(
     platform, native_dir, tmp_path, request
 ):

@@ -109,6 +109,7 @@ def read(path: Path) -> dict[str, np.ndarray]:
     return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
 
 
+@pytest.mark.slow
 def test_swap_runs_the_paper_scenario_as_pumaplant(fmu_dir, ssp_path, tmp_path):
     """`swap --replace plant=PinocchioPlant.fmu` runs the closed loop through the first impact
     (4.5 s): every column within 1e-9 of the run with PumaPlant."""
@@ -177,6 +178,7 @@ def test_swap_without_pinocchio_fails_in_one_line(fmu_dir, ssp_path, tmp_path):
     assert "PinocchioPlant needs the Python package pin" in errors[-1]
 
 
+@pytest.mark.slow
 def test_default_experiment_matches_pumaplants_reference(fmu_dir, tmp_path):
     """`fmpy simulate` on its own (the 20 s default experiment: the arm falls, swings, hangs):
     PumaPlant's reference result (PumaPlant_ref.csv) to 1e-9."""

@@ -146,6 +146,7 @@ def linux64_run(native_dir, tmp_path_factory, request) -> np.ndarray:
 
 
 @pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+@pytest.mark.slow
 def test_closed_loop_agrees_with_linux64(platform, native_dir, tmp_path, linux64_run, request):
     """The paper's 20 s closed loop on the platform's own binaries agrees with linux64."""
     need_compiler(platform)
@@ -213,6 +214,7 @@ def test_win64_dll_imports_only_the_system_c_runtime(native_dir, tmp_path, name)
 
 
 @pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+@pytest.mark.slow
 def test_sources_compile_without_warnings(platform, native_dir, tmp_path):
     """The FMUs' own sources/ compile with -Werror for the platform (same flags as linux64)."""
     toolchain = need_compiler(platform)
@@ -260,6 +262,7 @@ def test_a_compiler_that_fails_on_our_sources_fails_the_build(tmp_path, monkeypa
     assert not (tmp_path / PLANT).exists()
 
 
+@pytest.mark.slow
 def test_same_sources_give_byte_identical_binaries(tmp_path, monkeypatch):
     """Two builds in different folders give the same archive bytes, every platform's library
     included (no temp path, no time stamp in any of them); both compiled, not cached."""

@@ -165,6 +165,7 @@ int main(int argc, char **argv) {
 
 
 @pytest.mark.parametrize("platform", ["linux64", "win64"])
+@pytest.mark.slow
 def test_the_guard_loads_the_library_beside_it_and_refuses_freed_instances(
     platform, tmp_path, request
 ):

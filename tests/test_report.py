@@ -197,6 +197,7 @@ def test_an_error_before_any_run_writes_no_report(ssp_path, tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_files_of_an_earlier_run_are_removed(ssp_path, tmp_path, capsys):
     """A results folder describes one run: the figures, CSVs and summaries of an earlier command
     that this one did not write are removed (known names only), and one line says which."""
@@ -353,6 +354,7 @@ def _dump_dom(url: str, profile: Path) -> str:
 
 
 @pytest.mark.tools
+@pytest.mark.slow
 def test_chromium_opens_the_report_and_decodes_every_image(paper_run, tmp_path):
     dom = _dump_dom((paper_run / "report.html").as_uri(), tmp_path / "profile")
     assert "<h1>impedance-cosim run: observer ok, difference ok; Fig. 4 comparison" in dom
@@ -375,6 +377,7 @@ def test_chromium_opens_the_report_and_decodes_every_image(paper_run, tmp_path):
     assert 'data-decoded="4/4"' in dom and 'data-probe="false"' in dom
 
 
+@pytest.mark.slow
 def test_stability_writes_its_report(native_ssp, tmp_path, capsys):
     """`impedance-cosim stability`: its figure inline, every table as in its CSV, the provenance;
     after --resume (finished parts kept) the same content; none with --no-report."""

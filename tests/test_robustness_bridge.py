@@ -284,6 +284,7 @@ print(sent, flush=True)
 """
 
 
+@pytest.mark.slow
 def test_a_foreign_flood_at_full_speed_leaves_the_run_bit_identical(system, fmu_dir, tmp_path,
                                                                      procs):  # fmt: skip
     """One local socket sends the robot's port forged and garbage datagrams as fast as it can

@@ -165,6 +165,7 @@ CASES = [
 
 
 @pytest.mark.parametrize("ssp,args,status,message,rows", CASES)
+@pytest.mark.slow
 def test_bad_input_gives_one_line(
     ssp, args, status, message, rows, ssp_path, native_ssp, bad_archives, tmp_path
 ):
@@ -251,6 +252,7 @@ def _check_interrupted(status, line, sig, out, ssp, cwd, extra=()) -> None:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.slow
 def test_interrupted_native_run_keeps_every_row(sig, native_ssp, tmp_path):
     env = {**os.environ, "TMPDIR": str(tmp_path / "tmp")}
     (tmp_path / "tmp").mkdir()
@@ -261,6 +263,7 @@ def test_interrupted_native_run_keeps_every_row(sig, native_ssp, tmp_path):
     assert os.listdir(tmp_path / "tmp") == []  # extraction folders removed, also when stopped
 
 
+@pytest.mark.slow
 def test_interrupted_python_fmu_run_keeps_every_row(ssp_path, tmp_path):
     out = tmp_path / "out"
     args = ["run", "--ssp", str(ssp_path), "--stop", "400", "--no-figures"]
@@ -268,6 +271,7 @@ def test_interrupted_python_fmu_run_keeps_every_row(ssp_path, tmp_path):
     _check_interrupted(status, line, signal.SIGINT, out, ssp_path, tmp_path)
 
 
+@pytest.mark.slow
 def test_interrupted_realtime_run_keeps_every_row(native_ssp, tmp_path):
     out = tmp_path / "out"
     args = ["run", "--ssp", str(native_ssp), "--stop", "60", "--realtime", "--no-figures"]
@@ -291,6 +295,7 @@ def test_a_run_leaves_no_temporary_folders(ssp_path, native_ssp, tmp_path):
         assert os.listdir(tmp) == []
 
 
+@pytest.mark.slow
 def test_a_second_run_into_a_busy_folder_is_refused(native_ssp, tmp_path):
     """Run B starts while run A (paced to the wall clock: 5 s whatever the load) is writing into
     the same --out: B is refused with one line before it simulates anything; A's CSV is whole
@@ -319,6 +324,7 @@ def test_a_second_run_into_a_busy_folder_is_refused(native_ssp, tmp_path):
     assert list(out.glob(".*.tmp")) == []
 
 
+@pytest.mark.slow
 def test_two_builds_into_one_folder_at_once(tmp_path):
     from impedance_cosim.cosim.ssp import read_ssp
 

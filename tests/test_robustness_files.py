@@ -135,6 +135,7 @@ def test_a_mat_file_that_does_not_fit_keeps_the_rows_that_fit_and_says_where(nat
     assert run["status"] == "failed" and str(partial) in run["error"] and run["rows"] == 8001
 
 
+@pytest.mark.slow
 def test_a_figure_that_does_not_fit_is_named_and_not_left_half_written(native_ssp, tmp_path):
     """The CSV fits on a 64 kB tmpfs, Fig. 1 does not: the line names the figure (not its
     temporary name, even through nested temporary files) and its folder; no half figure."""
@@ -231,6 +232,7 @@ def test_a_sweep_table_on_a_full_disk_holds_whole_rows_and_says_so(native_ssp, t
         assert not list(out.glob(".*.tmp*"))
 
 
+@pytest.mark.slow
 def test_a_stability_log_on_a_full_disk_keeps_its_runs_for_resume(native_ssp, tmp_path):
     """The stability study's run log on a full disk (8 kB tmpfs): one line naming it and how
     many finished runs it holds, each line whole; with space again, --resume uses them."""
@@ -291,6 +293,7 @@ def test_every_command_writing_a_folder_takes_the_one_folder_lock(native_ssp, tm
     assert os.listdir(out) == []
 
 
+@pytest.mark.slow
 def test_a_build_waits_for_the_folder_and_leaves_no_lock_file(tmp_path):
     """build into a folder another command holds: it says it waits, then builds once the folder
     is free; no lock file is left in the folder."""
@@ -361,6 +364,7 @@ BAD_INPUT = [
 
 
 @pytest.mark.parametrize("args,message", BAD_INPUT, ids=[" ".join(a)[:32] for a, _ in BAD_INPUT])
+@pytest.mark.slow
 def test_bad_input_writes_nothing(native_ssp, tmp_path, args, message):
     """Every check comes before --out is created: exit 2, one line, no folder at all."""
     out = tmp_path / "NEW"

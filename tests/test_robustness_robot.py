@@ -97,6 +97,7 @@ def bridged(system, bridge, port, stop, **kw):
 # --- foreign datagrams ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_foreign_datagrams_mid_run_are_ignored(system, fmu_dir, robot):
     """While a lock-step bridge run goes on, another socket sends INITs and STEPs signed with
     another token, unsigned old-protocol datagrams, garbage, and STEPs signed with the right token
@@ -164,6 +165,7 @@ def test_token_is_not_on_the_command_line(robot):
 # --- bad requests from a peer that has the token ----------------------------------------------
 
 
+@pytest.mark.slow
 def test_bad_requests_are_refused_and_the_robot_lives_on(robot):
     port = robot()
     peer = Peer(port)
@@ -227,6 +229,7 @@ def test_bad_requests_are_refused_and_the_robot_lives_on(robot):
         peer.close()
 
 
+@pytest.mark.slow
 def test_an_internal_error_is_answered_and_survived():
     """A bug behind a valid request (here: the plant class raising something unexpected) gets an
     INTERNAL error reply without the exception's text, and the robot goes on serving."""
@@ -296,6 +299,7 @@ def test_bad_options_get_one_line(args, message):
     assert err.startswith("impedance-cosim robot: error: ") and message in err, err
 
 
+@pytest.mark.slow
 def test_token_sources_are_checked(tmp_path):
     def run(*args, env_token=None):
         code, _, err = robot_cli("--port", "0", "--duration", "0.2", *args, env_token=env_token)

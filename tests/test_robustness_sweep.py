@@ -108,6 +108,7 @@ def python_reference(ssp_path, tmp_path_factory) -> dict[int, dict]:
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.slow
 def test_signal_stops_a_serial_sweep_keeps_rows_and_resume_finishes_it(
     ssp_path, tmp_path, python_reference, signum
 ):
@@ -181,6 +182,7 @@ def wait_line(proc: subprocess.Popen, text: str, timeout: float = 300) -> None:
             buffer += chunk
 
 
+@pytest.mark.slow
 def test_dask_sweep_survives_a_lost_worker_and_ctrl_c(native_grid, native_reference, tmp_path):
     """2 workers: one is killed after the first rows (its run goes to another worker), then
     Ctrl-C; the table keeps every finished run; --resume (serial) equals a serial sweep."""
@@ -221,6 +223,7 @@ def running_worker(proc: subprocess.Popen, timeout: float = 300) -> psutil.Proce
 
 
 @pytest.mark.skipif(not Path("/proc/self/maps").is_file(), reason="needs /proc")
+@pytest.mark.slow
 def test_a_worker_killed_in_its_first_run_costs_no_row(native_grid, native_reference, tmp_path):
     """SIGKILL to a worker as soon as it runs: its runs go to the other worker, every row is the
     serial sweep's, exit 0. On main the archive was broadcast to every worker and each prepared
@@ -234,6 +237,7 @@ def test_a_worker_killed_in_its_first_run_costs_no_row(native_grid, native_refer
     assert strip(read_table(out / "sweep.csv")) == native_reference
 
 
+@pytest.mark.slow
 def test_a_worker_killed_while_the_cluster_starts_costs_nothing(native_grid, native_reference,
                                                                tmp_path):  # fmt: skip
     """SIGKILL to the first worker process as soon as it exists (the cluster is still starting,
@@ -254,6 +258,7 @@ def test_a_worker_killed_while_the_cluster_starts_costs_nothing(native_grid, nat
 
 
 @pytest.mark.parametrize("signum", [None, signal.SIGINT])
+@pytest.mark.slow
 def test_a_dask_sweep_leaves_nothing_in_tmpdir(native_grid, tmp_path, signum):
     """The workers' extractions (impcosim_fmu_*, impcosim_ssp_*) and dask's scratch folder are
     in a folder of the sweep's, removed once the cluster is closed, also after Ctrl-C; on main
@@ -277,6 +282,7 @@ def test_a_dask_sweep_leaves_nothing_in_tmpdir(native_grid, tmp_path, signum):
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("when", ["cluster starting", "runs under way"])
+@pytest.mark.slow
 def test_a_signal_during_a_dask_sweep_is_our_one_line(
     native_grid, native_reference, tmp_path, signum, when
 ):
@@ -299,6 +305,7 @@ def test_a_signal_during_a_dask_sweep_is_our_one_line(
         assert strip([row]) == {row["run"]: native_reference[row["run"]]}
 
 
+@pytest.mark.slow
 def test_a_lost_scheduler_keeps_the_rows_and_says_so(native_grid, native_reference, tmp_path):
     """A scheduler that goes away mid-sweep: on main its cancelled runs became `failed` rows
     (skipped by a resume) with dask's tracebacks and exit 0; now one line, exit 1, no row."""
@@ -459,6 +466,7 @@ def not_a_scheduler(request):
         c.close()
 
 
+@pytest.mark.slow
 def test_a_port_that_is_not_a_scheduler_fails_within_the_timeout(
     native_ssp, tmp_path, not_a_scheduler
 ):

@@ -412,6 +412,7 @@ def test_a_bad_parameter_value_names_the_archive_and_the_ssv(archive, tmp_path, 
     )
 
 
+@pytest.mark.slow
 def test_cli_gives_one_line_for_each_bad_archive(archive, tmp_path):
     """End to end: the CLI on hostile archives prints one line naming the problem, no traceback,
     and exits non-zero."""
@@ -449,6 +450,7 @@ def test_cli_gives_one_line_for_each_bad_archive(archive, tmp_path):
         assert "Traceback" not in done.stderr + done.stdout, case
 
 
+@pytest.mark.slow
 def test_cli_run_leaves_no_extraction_folder(archive, tmp_path):
     """A CLI run leaves no folder of the reader's: a successful one, one refused at load and
     one interrupted by Ctrl-C."""
@@ -573,6 +575,7 @@ class _AnythingGoes:
 
 
 @pytest.mark.parametrize("schema", ["with schema", "without schema"])
+@pytest.mark.slow
 def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
     archive, tmp_path, private_tmp, monkeypatch, schema
 ):

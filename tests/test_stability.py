@@ -208,6 +208,7 @@ def matching(rows, ref_rows, keys):
     return [(r, ref[tuple(r[k] for k in keys)]) for r in rows]
 
 
+@pytest.mark.slow
 def test_study_reproduces_committed_tables(tmp_path, native_ssp):
     cli("boundaries", "linear", "fig4", "--quantity", "rate", "--quantity", "K", "--sensor",
         "ideal", "--velocity", "measured", "--velocity", "observer", "--timing", "gauss-seidel",
@@ -233,6 +234,7 @@ def test_study_reproduces_committed_tables(tmp_path, native_ssp):
             assert got[k] == (pytest.approx(v, rel=1e-9) if isinstance(v, float) else v), k
 
 
+@pytest.mark.slow
 def test_gain_table_reproduces(tmp_path, native_ssp):
     cli("gain", tmp_path=tmp_path, ssp=native_ssp)
     got = read_csv(tmp_path / "observer_discretization.csv")

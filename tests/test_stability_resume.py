@@ -57,6 +57,7 @@ def reference(native_ssp, tmp_path_factory) -> tuple[dict, bytes]:
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.slow
 def test_a_signal_mid_part_keeps_its_runs_and_resume_finishes_it(
     native_ssp, tmp_path, reference, signum
 ):
@@ -120,6 +121,7 @@ def stability_main(ssp: Path, out: Path, *args: str) -> int:
                  str(ssp), "--out", str(out)])  # fmt: skip
 
 
+@pytest.mark.slow
 def test_gain_interrupted_then_resumed(native_ssp, tmp_path, monkeypatch, capsys):
     out = tmp_path / "g"
     interrupting(monkeypatch, stability_parts, "run_point", 11, KeyboardInterrupt())
@@ -139,6 +141,7 @@ def test_gain_interrupted_then_resumed(native_ssp, tmp_path, monkeypatch, capsys
     assert got == read_csv(DOCS / "observer_discretization.csv")
 
 
+@pytest.mark.slow
 def test_fig4_interrupted_then_resumed(native_ssp, tmp_path, monkeypatch):
     """The difference's run after the resume needs the observer run's kept signal."""
     out = tmp_path / "f"
@@ -161,6 +164,7 @@ def test_fig4_interrupted_then_resumed(native_ssp, tmp_path, monkeypatch):
             assert r[k] == (pytest.approx(v, rel=1e-9) if isinstance(v, float) else v), k
 
 
+@pytest.mark.slow
 def test_linear_fails_part_way_then_resumes(native_ssp, tmp_path, monkeypatch, capsys):
     """A failure (here a full disk at the 6th bisection run) keeps the runs before it; the page
     says so; --resume finishes the bisection and the linearised row."""

@@ -56,6 +56,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = _Parser(
         prog="impedance-cosim",
         description="Impedance control without velocity measurements, as FMI co-simulation.",
+        epilog="`impedance-cosim <command> --help` lists that command's options.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -100,7 +101,8 @@ def add_run(sub) -> None:
         "--event-exact",
         action="store_true",
         help="step each FMI 3.0 FMU with event mode (the plant) to its events inside the"
-        " communication steps (contact switches, handled in Event Mode); the grid stays",
+        " communication steps (contact switches, handled in Event Mode); the rows stay on the"
+        " communication grid",
     )
     p.set_defaults(func=run_cmd.cmd_run)
 

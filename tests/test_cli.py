@@ -50,6 +50,7 @@ def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
     "args,message",
     [
         (["--set", "controller.Kx=3"], "unknown parameter controller.Kx"),
+        (["--set", "controller.Gx=3"], "did you mean controller.G3, controller.G2, controller.G1?"),
         (["--set", "controller.K1"], "--set expects component.variable=value"),
         (["--scenario", "fast"], "no parameter set 'fast'"),
         (["--step", "-1"], "argument --step: must be a finite number > 0"),

@@ -143,6 +143,21 @@ def test_robot_refuses_an_odd_token_file_with_one_line(odd_files, procs, kind):
     ), err
 
 
+def test_swap_to_the_bridge_without_a_robot_says_how_to_start_one(ssp_path, fmu_dir, tmp_path,
+                                                                   capsys):  # fmt: skip
+    """No --robot and no token of a robot the user started: one line saying how to start one or
+    to let swap start it (not the bridge's token error after the run began), nothing written."""
+    from impedance_cosim.cli import main
+
+    out = tmp_path / "res"
+    assert main(swap_bridge(ssp_path, fmu_dir, out, "0.1")[len(CLI) :]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert "is a bridge to a robot process and none is given: use --robot lockstep" in lines[0]
+    assert "--set plant.robot_token_file=PATH" in lines[0]
+    assert not out.exists()
+
+
 def test_swap_refuses_a_fifo_token_file_before_it_runs(ssp_path, fmu_dir, odd_files, tmp_path,
                                                         procs):  # fmt: skip
     fifo, message = odd_files["fifo"]

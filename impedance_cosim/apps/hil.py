@@ -187,6 +187,8 @@ def _cmd_swap(args: argparse.Namespace) -> int:
             f"the replacement does not fit the system ({len(problems)}):\n{lines}"
         )
     args.fmu_files = replace
+    if not args.robot:
+        _check_robot_given(replace, overrides)
     robot = None
     if args.robot:
         bridged = [c for c, p in replace.items() if _has_parameter(p, "robot_port")]
@@ -204,6 +206,21 @@ def _cmd_swap(args: argparse.Namespace) -> int:
     finally:
         if robot is not None:
             stop_robot(robot)
+
+
+def _check_robot_given(replace: Mapping[str, Path], overrides: Mapping[str, str]) -> None:
+    """A bridge replacement without --robot needs a robot started by the user, named by its
+    token: say how to start one, or to let swap start it, before anything runs."""
+    from impedance_cosim.apps import options
+
+    for comp, path in replace.items():
+        given = {f"{comp}.robot_token_file", f"{comp}.robot_token"} & set(overrides)
+        if _has_parameter(path, "robot_port") and not given:
+            raise options.CliError(
+                f"{comp}={path} is a bridge to a robot process and none is given: use --robot"
+                " lockstep (or realtime) to let swap start one, or start one (`impedance-cosim"
+                f" robot --token-file PATH`) and add --set {comp}.robot_token_file=PATH"
+            )
 
 
 def _check_archives(replace: Mapping[str, Path]) -> None:

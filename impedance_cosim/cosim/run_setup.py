@@ -4,6 +4,7 @@ user's overrides) checked against the FMUs' variables and units."""
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -152,7 +153,10 @@ def _parameter_variable(variables, comp: str, var: str, where: str):
         raise MasterError(f"unknown component {comp!r} {where} (have {list(variables)})")
     v = variables[comp].get(var)
     if v is None:
-        raise MasterError(f"unknown parameter {comp}.{var} {where}")
+        names = [n for n, x in variables[comp].items() if x.causality == "parameter"]
+        close = [f"{comp}.{n}" for n in difflib.get_close_matches(var, names, n=3, cutoff=0.5)]
+        hint = f"; did you mean {', '.join(close)}?" if close else ""
+        raise MasterError(f"unknown parameter {comp}.{var} {where}{hint}")
     if v.causality != "parameter":
         raise MasterError(f"{comp}.{var} is a{'n' if v.causality[0] in 'aeiou' else ''} "
                           f"{v.causality}, not a parameter")  # fmt: skip

@@ -51,7 +51,9 @@ def two_builds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    wrote, measured = done.stdout.strip().splitlines()
+    building, bundling, wrote, measured = done.stdout.strip().splitlines()
+    assert building == f"building every FMU and archive into {b / 'fmus'} ..."
+    assert bundling.startswith("bundling ") and bundling.endswith(f" files into {b / 'dist'} ...")
     assert wrote == f"wrote {b / 'dist' / (NAME + '.zip')}"
     # its size and the build's time as measured (printed, not asserted: they vary)
     assert re.fullmatch(rf"{NAME}\.zip: [\d.]+ MB \(\d+ bytes\), \d+ files; built and bundled"

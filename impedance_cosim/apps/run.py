@@ -67,8 +67,21 @@ def ensure_built(args: argparse.Namespace, ssp: Path) -> None:
 
         with FolderLock(prepare_out(ssp.parent), "build folder", wait=BUILD_WAIT_S):
             if stale(ssp):  # not built meanwhile by another process
-                print("building the FMUs and the system archive ...", file=sys.stderr)
-                cmd_build(argparse.Namespace(out=str(ssp.parent), only=None))
+                _first_build(ssp.parent)
+
+
+def _first_build(out: Path) -> None:
+    """The build before a first run: one line before and one after (`build` lists each file)."""
+    import time
+
+    from impedance_cosim.packaging.build_all import build_all
+
+    print(f"building the FMUs and system archives into {out} (once) ...", file=sys.stderr,
+          flush=True)  # fmt: skip
+    started = time.perf_counter()
+    built = build_all(out)
+    print(f"built {len(built)} FMUs and archives in {time.perf_counter() - started:.0f} s",
+          file=sys.stderr)  # fmt: skip
 
 
 def cmd_run(args: argparse.Namespace) -> int:

@@ -192,7 +192,8 @@ def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
     try:
         import pythonfmu3  # noqa: F401
     except ImportError:
-        print("note: pythonfmu3 not installed: no FMI 3.0 Python FMUs", file=sys.stderr)
+        print("FMI 3.0 Python FMUs skipped (optional: pip install pythonfmu3 adds them)",
+              file=sys.stderr)  # fmt: skip
         return built
     built += [build_python_fmu3(FMUS[k], folder / "python") for k in ("plant", "controller")]
     return built

@@ -38,10 +38,12 @@ def build_dist(dist_dir: Path, out_dir: Path = DEFAULT_OUT) -> Path:
     """Build every FMU and system archive into out_dir, then bundle them into
     dist_dir/impedance-cosim-<version>.zip; return the bundle's path."""
     Path(dist_dir).mkdir(parents=True, exist_ok=True)  # fail before building, not after
+    print(f"building every FMU and archive into {out_dir} ...", flush=True)
     try:
         built = build_all(Path(out_dir))
     except RuntimeError as exc:  # a failed compile: one message, no traceback
         raise ValueError(str(exc)) from None
+    print(f"bundling {len(built)} files into {dist_dir} ...", flush=True)
     return bundle(built, Path(out_dir), Path(dist_dir))
 
 

@@ -145,6 +145,7 @@ def _run_parts(args: argparse.Namespace, ssp: Path, out: Path, record: Record) -
             if part == "boundaries":
                 simulated = rows
             continue
+        print(f"{part} ...", flush=True)  # a part takes seconds to minutes
         with PartLog(out, part, plan, args.resume, valid_record) as log:
             record.set(part, status="running", plan=plan, table=table.name, log=log_path.name,
                        figures=[], kept_runs=len(log.kept), runs=0)  # fmt: skip

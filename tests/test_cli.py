@@ -42,8 +42,10 @@ def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
     assert main([*args, "controller.G=1e9", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "error:" in err
-    rows = read_csv(out / "observer.csv")
-    assert 2 < len(rows) < 2001 and f"{len(rows)} rows kept in {out / 'observer.csv'}" in err
+    rows = read_csv(out / "observer.csv.partial")  # the run failed: not under the result's name
+    assert (
+        2 < len(rows) < 2001 and f"{len(rows)} rows kept in {out / 'observer.csv.partial'}" in err
+    )
 
 
 @pytest.mark.parametrize(
@@ -96,7 +98,8 @@ def test_a_command_fails_when_any_of_its_runs_fails(ssp_path, tmp_path, capsys, 
     assert main(["run", "--ssp", str(ssp_path), "--stop", "0.5", "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "difference: made to fail by the test" in err[0]
-    assert (out / "observer.csv").is_file() and (out / "difference.csv").is_file()
+    assert (out / "observer.csv.partial").is_file() and (out / "difference.csv.partial").is_file()
+    assert not (out / "observer.csv").exists()  # only a command that completes writes those
 
 
 def test_results_csv_appears_only_when_closed(tmp_path):

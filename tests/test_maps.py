@@ -61,3 +61,53 @@ def test_a_metric_no_run_has_is_a_map_that_says_so(tmp_path: Path, axes: list[st
     png = tmp_path / "empty.png"
     plot_map(rows, axes, "settled_force_N", png, mode="random")
     assert mpimg.imread(png).shape[1] >= 600
+
+
+def _colour_share(png: Path, rgb: tuple[int, int, int]) -> float:
+    """The share of a PNG's pixels that are exactly rgb (0-255)."""
+    import numpy as np
+
+    image = (mpimg.imread(png)[..., :3] * 255).round().astype(int)
+    return float(np.all(image == rgb, axis=-1).mean())
+
+
+def test_a_missing_value_is_grey_not_the_colour_of_not_bounded(tmp_path: Path) -> None:
+    """Issue 35, item 5: the README's sweep (every run bounded, none in contact within 2 s) drew
+    all its cells black, the colour the caption gives to "not bounded". A cell without a value
+    is grey and hatched and says so; only runs that did not stay bounded are black."""
+    axes = ["controller.K", "system.scenario"]
+    grid = [(k, s) for k in (25.0, 50.0, 100.0) for s in ("observer", "difference")]
+    png = tmp_path / "missing.png"
+    rows = [{"controller.K": k, "system.scenario": s, "status": "ok", "settled_force_N": None}
+            for k, s in grid]  # fmt: skip
+    plot_map(rows, axes, "settled_force_N", png)
+    assert _colour_share(png, (0, 0, 0)) < 0.02  # text only, no black cell
+    assert _colour_share(png, (217, 217, 217)) > 0.15  # the grey of "no value"
+
+    unbounded = tmp_path / "unbounded.png"
+    rows = [{**r, "status": "diverged", "t_end_s": 0.5} for r in rows]
+    plot_map(rows, axes, "settled_force_N", unbounded)
+    assert _colour_share(unbounded, (0, 0, 0)) > 0.15
+    assert _colour_share(unbounded, (217, 217, 217)) < 0.01
+
+
+def test_the_caption_names_only_the_kinds_of_cells_drawn(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import matplotlib.figure
+
+    titles: list[str] = []
+    original = matplotlib.figure.Figure.suptitle
+
+    def spy(self, t, **k):
+        titles.append(t)
+        return original(self, t, **k)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "suptitle", spy)
+    rows = _rows()
+    rows[-1] = {**rows[-1], "status": "ok", "settled_force_N": None}
+    plot_map(rows, ["system.rate", "controller.G1"], "settled_force_N", tmp_path / "m.png")
+    plot_map([r for r in rows if r["status"] == "ok" and r["settled_force_N"] is not None],
+             ["system.rate", "controller.G1"], "settled_force_N", tmp_path / "n.png")  # fmt: skip
+    assert "not bounded" in titles[0] and "no value" in titles[0]
+    assert "not bounded" not in titles[1] and "no value" in titles[1]  # the 100 row: no run

@@ -301,3 +301,51 @@ def test_relative_link_resolves(page: Path, target: str) -> None:
 def test_links_are_collected() -> None:
     assert len(LINKS) >= 20
     assert any("#" in t for _, t in LINKS)
+
+
+DEFAULT_OUT = {"run": "results", "swap": "results/swap", "sweep": "results/sweep",
+               "stability": "results/stability"}  # fmt: skip
+QUICK_START = "impedance-cosim run"  # the README's quick start: the paper's results in results/
+
+
+def result_folders() -> list[tuple[str, str, str]]:
+    """(block id, command, output folder) of every command in the pages' sh blocks that writes
+    results into results/ (run, swap, sweep, stability; --out or the command's default)."""
+    import shlex
+
+    found = []
+    for block in SH:
+        for command in commands(block):
+            if expected_status(command) == 2:  # bad input: writes nothing
+                continue
+            for part in strip_setup(command).split("&&"):
+                words = shlex.split(re.sub(r"\s+#.*$", "", part))
+                if len(words) < 2 or words[0] != "impedance-cosim" or words[1] not in DEFAULT_OUT:
+                    continue
+                if "--help" in words or "-h" in words or "--list-parameters" in words:
+                    continue
+                out = DEFAULT_OUT[words[1]]
+                for k, w in enumerate(words[:-1]):
+                    if w == "--out":
+                        out = words[k + 1]
+                out = out.rstrip("/")
+                if out == "results" or out.startswith("results/"):
+                    found.append((block.id, " ".join(words), out))
+    return found
+
+
+def test_examples_do_not_write_over_the_quick_start_or_each_other() -> None:
+    """Issue 35, item 1: the README's examples wrote into results/ over the quick start's paper
+    results (the native run replaced report.html with a 2 s run, --realtime removed the
+    *-jacobi.csv files). Every example command that writes into results/ has its own folder;
+    only the quick start writes results/ itself."""
+    found = result_folders()
+    assert (found[0][1], found[0][2]) == (QUICK_START, "results"), found[0]
+    assert len(found) > 10, found  # the commands are collected
+    by_folder: dict[str, list[str]] = {}
+    for where, command, out in found[1:]:
+        if "--resume" not in command.split():  # continues the folder of the command before it
+            by_folder.setdefault(out, []).append(f"{where}: {command}")
+    assert "results" not in by_folder, by_folder.get("results")
+    shared = {out: cmds for out, cmds in by_folder.items() if len(cmds) > 1}
+    assert not shared, shared

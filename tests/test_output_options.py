@@ -83,8 +83,8 @@ def test_an_interrupt_while_the_mat_file_is_written_keeps_the_rows(
     native_ssp, tmp_path, capsys, monkeypatch
 ) -> None:
     """Ctrl-C as the finished run's .mat is written (the writer raises KeyboardInterrupt): the
-    rows go to observer.mat.partial, the line says so, run.json records the run, and the
-    earlier run's observer.mat is left as it was (on main: nothing kept, "runs": [])."""
+    rows go to observer.mat.partial, the line says so, run.json.partial records the run, and
+    the earlier run's files are left as they were (on main: nothing kept, "runs": [])."""
     import scipy.io
     from scipy.io import loadmat
 
@@ -103,14 +103,14 @@ def test_an_interrupt_while_the_mat_file_is_written_keeps_the_rows(
     capsys.readouterr()
     assert run(native_ssp, out, "--result-format", "mat") == 130
     partial = out / "observer.mat.partial"
-    *removed, line = capsys.readouterr().err.strip().splitlines()  # the earlier summary: stale
-    assert [r.endswith("observer_summary.json") for r in removed] == [True]
+    (line,) = capsys.readouterr().err.strip().splitlines()  # nothing of the earlier run removed
     mat = out / "observer.mat"
     assert line == (f"impedance-cosim run: interrupted (SIGINT) while writing {mat}; the 1801"
                     f" rows (to t=4.5 s) are in {partial}")  # fmt: skip
     assert (out / "observer.mat").read_bytes() == before
+    assert (out / "observer_summary.json").is_file()  # the earlier run's, kept
     assert loadmat(partial)["data_2"].shape[1] == 1801
-    entry = json.loads((out / "run.json").read_text())["runs"][0]
+    entry = json.loads((out / "run.json.partial").read_text())["runs"][0]
     assert (
         entry["status"] == "interrupted"
         and entry["rows"] == 1801
@@ -136,12 +136,10 @@ def test_an_interrupt_as_the_csv_is_renamed_into_place_keeps_run_json(
     out = tmp_path / "out"
     assert run(native_ssp, out) == 130
     (line,) = capsys.readouterr().err.strip().splitlines()
-    assert (
-        line
-        == f"impedance-cosim run: interrupted (SIGINT); 1801 rows kept in {out / 'observer.csv'}"
-    )
-    assert len((out / "observer.csv").read_text().splitlines()) == 1 + 1801
-    entry = json.loads((out / "run.json").read_text())["runs"][0]
+    kept = out / "observer.csv.partial"  # the command did not complete
+    assert line == f"impedance-cosim run: interrupted (SIGINT); 1801 rows kept in {kept}"
+    assert len((out / "observer.csv.partial").read_text().splitlines()) == 1 + 1801
+    entry = json.loads((out / "run.json.partial").read_text())["runs"][0]
     assert entry["status"] == "interrupted" and entry["rows"] == 1801
 
 

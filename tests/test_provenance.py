@@ -49,7 +49,7 @@ def test_a_failed_run_keeps_its_record(ssp_path, tmp_path):
     argv = ["run", "--ssp", str(ssp_path), "--stop", "0.2", "--set", "plant.x0=5.0",
             "--out", str(out), "--no-figures", "--no-progress"]  # fmt: skip
     assert main(argv) == 1
-    (run,) = json.loads((out / "run.json").read_text())["runs"]
+    (run,) = json.loads((out / "run.json.partial").read_text())["runs"]
     assert run["status"] == "failed" and "unreachable" in run["error"]
     assert run["overrides"] == {"plant.x0": "5.0"}
 

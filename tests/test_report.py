@@ -178,11 +178,14 @@ def test_a_failed_run_writes_a_report_saying_so(ssp_path, tmp_path):
     argv = ["run", "--ssp", str(ssp_path), "--stop", "0.5", "--set", "plant.x0=5.0",
             "--out", str(out), "--no-progress"]  # fmt: skip
     assert main(argv) == 1
-    page = check_page(out / "report.html")
+    page = check_page(out / "report.html.partial")  # the command did not complete: .partial
     text = " ".join(page.text)
     assert "impedance-cosim run: observer FAILED" in text
     assert "This command FAILED: observer: failed:" in text and "is unreachable" in text
-    assert "Kept in the results folder: observer.csv (0 rows, observer), run.json" in text
+    assert (
+        "Kept in the results folder: observer.csv.partial (0 rows, observer), run.json.partial"
+        in text
+    )
     assert page.images() == [] and "No figures were made by this command." in text
     assert page.row("start pose")[3] == "(5.0 m, 0.0 m) (NOT the paper)"
 

@@ -223,7 +223,7 @@ def test_a_signal_during_the_init_wait_ends_it(ssp_path, fmu_dir, tmp_path, proc
     assert proc.returncode == 128 + sig, err
     assert err.strip().splitlines() == [
         f"impedance-cosim swap: interrupted by {name} at t=0 s; 0 rows kept in"
-        f" {tmp_path / 'res' / 'observer.csv'}"
+        f" {tmp_path / 'res' / 'observer.csv.partial'}"
     ] or (len(err.strip().splitlines()) == 1 and f"interrupted by {name}" in err), err
 
 

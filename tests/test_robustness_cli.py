@@ -20,7 +20,7 @@ import pytest
 
 CLI = [sys.executable, "-m", "impedance_cosim.cli"]
 H = 1 / 400
-KEPT = re.compile(r"(\d+) rows kept in (\S+\.csv)")
+KEPT = re.compile(r"(\d+) rows kept in (\S+\.csv\.partial)")  # a failed run: .partial
 
 
 def cli(*args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -213,7 +213,7 @@ def _interrupt(args: list[str], out: Path, sig: int, cwd: Path, env: dict) -> tu
     try:
         started = time.monotonic()
         while time.monotonic() - started < 60 and proc.poll() is None:
-            partial = list(out.glob(".observer.csv.*.tmp"))
+            partial = list(out.glob(".staging-*/.observer.csv.*.tmp"))
             if (
                 time.monotonic() - started > wait
                 and partial
@@ -230,15 +230,17 @@ def _interrupt(args: list[str], out: Path, sig: int, cwd: Path, env: dict) -> tu
 
 
 def _check_interrupted(status, line, sig, out, ssp, cwd, extra=()) -> None:
-    """Exit 128 + sig, one line saying when it stopped, and a CSV whose rows are exactly those
-    of an uninterrupted run to that time."""
+    """Exit 128 + sig, one line saying when it stopped, and a CSV (observer.csv.partial: the
+    command did not complete) whose rows are exactly those of an uninterrupted run to that
+    time; no staging folder left."""
     name = signal.Signals(sig).name
     assert status == 128 + sig, line
     m = re.search(rf"interrupted by {name} at t=(\S+) s; (\d+) rows kept in (\S+)", line)
     assert m, line
     stop, rows = float(m.group(1)), int(m.group(2))
-    assert Path(m.group(3)) == out / "observer.csv" and rows == round(stop / H) + 1
-    names, data = read_rows(out / "observer.csv")
+    kept = out / "observer.csv.partial"  # the run did not complete: not under the result's name
+    assert Path(m.group(3)) == kept and rows == round(stop / H) + 1
+    names, data = read_rows(kept)
     assert len(data) == rows and data[-1][0] == pytest.approx(stop, rel=1e-12)
     ref = cwd / "reference"
     done = cli("run", "--ssp", str(ssp), "--stop", repr(stop), "--out", str(ref), "--no-figures",
@@ -248,7 +250,7 @@ def _check_interrupted(status, line, sig, out, ssp, cwd, extra=()) -> None:
     common = [k for k, n in enumerate(names) if n in ref_names]
     assert len(common) == len(ref_names)
     assert [[row[k] for k in common] for row in data] == ref_data
-    assert list(out.glob(".*.tmp")) == []
+    assert list(out.glob(".*.tmp")) == [] and list(out.glob(".staging-*")) == []
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -277,7 +279,7 @@ def test_interrupted_realtime_run_keeps_every_row(native_ssp, tmp_path):
     args = ["run", "--ssp", str(native_ssp), "--stop", "60", "--realtime", "--no-figures"]
     status, line = _interrupt(args, out, signal.SIGINT, tmp_path, None)
     _check_interrupted(status, line, signal.SIGINT, out, native_ssp, tmp_path)
-    names, _ = read_rows(out / "observer.csv")
+    names, _ = read_rows(out / "observer.csv.partial")
     assert names[-3:] == ["rt.start_late_s", "rt.compute_s", "rt.lateness_s"]
 
 
@@ -308,7 +310,9 @@ def test_a_second_run_into_a_busy_folder_is_refused(native_ssp, tmp_path):
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
     try:
         started = time.monotonic()
-        while not list(out.glob(".observer.csv.*.tmp")) and time.monotonic() - started < 60:
+        while (
+            not list(out.glob(".staging-*/.observer.csv.*.tmp")) and time.monotonic() - started < 60
+        ):
             time.sleep(0.02)
         second = cli(*args, str(out), cwd=tmp_path)
         assert first.poll() is None, "the first run ended before the second started"

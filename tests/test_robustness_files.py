@@ -89,7 +89,7 @@ def test_a_full_disk_keeps_the_rows_that_fit_and_names_the_file(native_ssp, tmp_
         assert len(error) == 1 and "No space left on device" in error[0], done.stderr
         _check_partial(out, error[0])
         warnings = [ln for ln in lines(done.stderr) if ": warning: " in ln]
-        assert all(str(out / "run.json") in w for w in warnings), warnings  # named, not raw
+        assert all(str(out / "run.json.partial") in w for w in warnings), warnings  # named
         assert set(os.listdir(out)) == {"observer.csv.partial"}
 
 
@@ -105,9 +105,9 @@ def test_a_file_size_limit_is_a_full_disk_without_a_mount(native_ssp, tmp_path):
     (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
     assert "File too large" in line
     _check_partial(out, line)
-    run = json.loads((out / "run.json").read_text())["runs"][0]
+    run = json.loads((out / "run.json.partial").read_text())["runs"][0]  # a failed command's
     assert run["status"] == "failed" and "observer.csv.partial" in run["error"]
-    assert (out / "report.html").is_file()
+    assert (out / "report.html.partial").is_file()
 
 
 def test_a_mat_file_that_does_not_fit_keeps_the_rows_that_fit_and_says_where(native_ssp, tmp_path):
@@ -131,7 +131,7 @@ def test_a_mat_file_that_does_not_fit_keeps_the_rows_that_fit_and_says_where(nat
     kept = loadmat(partial)["data_2"]
     assert kept.shape[1] == int(match.group(1)) > 1000
     assert f"{kept[0, -1]:.9g}" == match.group(2) and kept[0, 0] == 0.0
-    run = json.loads((out / "run.json").read_text())["runs"][0]
+    run = json.loads((out / "run.json.partial").read_text())["runs"][0]
     assert run["status"] == "failed" and str(partial) in run["error"] and run["rows"] == 8001
 
 
@@ -147,7 +147,7 @@ def test_a_figure_that_does_not_fit_is_named_and_not_left_half_written(native_ss
         (line,) = [ln for ln in lines(done.stderr) if ": error: " in ln]
         assert line.endswith(f"cannot write fig1_position_force.png in {out}: No space left on"
                              " device"), line  # fmt: skip
-        assert whole_csv(out / "observer.csv") == 41
+        assert whole_csv(out / "observer.csv.partial") == 41  # the command failed
         assert not list(out.glob("*.png")) and not list(out.glob(".*"))
 
 
@@ -329,7 +329,10 @@ def test_a_sweep_into_the_folder_of_a_running_run_is_refused(native_ssp, tmp_pat
                            text=True)  # fmt: skip
     try:
         started = time.monotonic()
-        while not list(out.glob(".observer.csv.*.tmp")) and time.monotonic() - started < 120:
+        while (
+            not list(out.glob(".staging-*/.observer.csv.*.tmp"))
+            and time.monotonic() - started < 120
+        ):
             time.sleep(0.05)
         assert run.poll() is None, run.stderr.read()
         sweep = cli(*commands["sweep"], cwd=tmp_path)

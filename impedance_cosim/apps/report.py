@@ -114,18 +114,20 @@ def _banner(kind: str, problems: str, record: Mapping[str, Any], kept: str, what
 FIG4_NOTE = "runs under one sample of delay, for Fig. 4's second row (the paper's figure)"
 
 
-def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path) -> list[str]:
-    """The files this command left in the results folder."""
+def _kept(record: Mapping[str, Any], figures: Sequence[Path], out: Path,
+          suffix: str = "") -> list[str]:  # fmt: skip
+    """The files this command left in the results folder (suffix: ".partial" when it did not
+    complete, its files beside the earlier ones)."""
     files = []
     for r in record.get("runs", []):
         kept = r.get("results") or {"file": r.get("csv"), "rows": r.get("rows", "?")}
         if kept.get("file"):
             files.append(f"{kept['file']} ({kept.get('rows', '?')} rows, {r.get('scenario')})")
-        name = f"{r.get('scenario')}_summary.json"
+        name = f"{r.get('scenario')}_summary.json{suffix}"
         if "summary" in r and (out / name).is_file():
             files.append(f"{name} (the summary)")
     files += [f"{Path(p).name} (figure)" for p in figures]
-    return [*files, "run.json (provenance)", f"{REPORT_NAME} (this page)"]
+    return [*files, f"run.json{suffix} (provenance)", f"{REPORT_NAME}{suffix} (this page)"]
 
 
 def _main(runs: Sequence[Run]) -> Run:
@@ -138,6 +140,7 @@ def run_report(
     figures: Sequence[Path] = (),
     error: BaseException | None = None,
     out: Path = Path("."),
+    suffix: str = "",
 ) -> str:
     """The page of one `impedance-cosim run` (or swap): record is its run.json, figures the PNG
     files it wrote, error the exception it is ending with (if any)."""
@@ -148,7 +151,7 @@ def run_report(
     heading = _heading(record)
     failed = kind == "failed" and "FAILED" not in heading  # e.g. an error after the runs
     title = f"impedance-cosim {verb}: {heading}" + (", FAILED" if failed else "")
-    kept = ", ".join(_kept(record, figures, out))
+    kept = ", ".join(_kept(record, figures, out, suffix))
     banner = _banner(kind, problems, record, kept, "command")
     body = _run_sections(record, figures, f"this command ({scenario})", "run.json",
                          "The columns of the CSV files that have a unit")  # fmt: skip
@@ -270,9 +273,12 @@ def write_run_report(
     record: Mapping[str, Any],
     figures: Sequence[Path] = (),
     error: BaseException | None = None,
+    suffix: str = "",
 ) -> Path | None:
-    """`report.html` in the results folder out (see run_report), written atomically."""
-    return _write(Path(out) / REPORT_NAME, run_report(record, figures, error, Path(out)), error)
+    """`report.html` in the results folder out (see run_report), written atomically; suffix
+    ".partial": the page of a command that did not complete, beside an earlier one's."""
+    page = run_report(record, figures, error, Path(out), suffix)
+    return _write(Path(out) / (REPORT_NAME + suffix), page, error)
 
 
 def write_result_report(path: Path, record: Mapping[str, Any],

@@ -3,8 +3,12 @@ its Fig. 4 pair; for `run` under sample-and-hold also the pair under one sample 
 paper's Fig. 4), and the FMUs built when they are missing or out of date.
 
 A diverged run is a result (cosim.results): its rows, its summary, its Fig. 4, exit status 3;
-a failed one is exit status 1. The results folder describes this command alone: result files
-of an earlier one (known names only) that this one did not write are removed, said in one line."""
+a failed one is exit status 1. A command writes into a staging folder inside the results folder
+(`.staging-<pid>/`). When it completes (exit 0 or 3) its files replace those of an earlier one,
+and the earlier one's result files (known names only) that this one did not write are removed,
+said in one line: the folder describes this command alone. When it fails or is interrupted,
+every earlier file is left as it was and this command's files, run.json and report.html too,
+are kept beside them as `<name>.partial`."""
 
 from __future__ import annotations
 
@@ -12,6 +16,8 @@ import argparse
 import contextlib
 import io
 import json
+import os
+import shutil
 import signal
 import sys
 import time
@@ -141,14 +147,16 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
     runs: list[dict] = []  # provenance of each run, written to run.json on every exit path
     written: list[Path] = []  # the result files this command wrote (the rest are stale)
     started, t0 = provenance.now_utc(), time.perf_counter()
+    stage = staging_folder(out)  # where this command writes until it has completed
 
     def run(scenario: str | None, algorithm: str | None = args.algorithm, role: str | None = None):
         master = _master(args, system, overrides, scenario, algorithm)
         stem = master.parameter_set or "run"
         fmt, every = getattr(args, "result_format", "csv"), getattr(args, "output_every", 1)
-        path = out / (f"{stem}-{master.algorithm}.{fmt}" if role else f"{stem}.{fmt}")
-        stream = results_stream(path, fmt, every, master)
-        result = _run_into(master, stream, path, progress, overrides, runs, written)
+        name = f"{stem}-{master.algorithm}.{fmt}" if role else f"{stem}.{fmt}"
+        path, kept = out / name, out / (name + PARTIAL)  # where it goes; if the command fails
+        stream = results_stream(stage / name, fmt, every, master)
+        result = _run_into(master, stream, kept, progress, overrides, runs, written)
         runs[-1]["results"] = {"file": path.name, "format": fmt, "rows": stream.rows,
                                "output_interval_s": every * master.step_size}  # fmt: skip
         if role:
@@ -157,38 +165,112 @@ def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Pa
         rtf = span / max(result.wall_time, 1e-9)
         status = {"ok": "ok", "diverged": str(result.divergence)}.get(result.status, "FAILED")
         rows = f"{len(result.data)} rows" + (f", {stream.rows} written" if every > 1 else "")
-        print(f"{stem}{f' ({role})' if role else ''}: {status}, {rows} -> {path} "
+        where = kept if result.status == "failed" else path
+        print(f"{stem}{f' ({role})' if role else ''}: {status}, {rows} -> {where} "
               f"({result.wall_time:.2f} s wall, {rtf:.1f}x real time)")  # fmt: skip
         if result.status == "failed":
             error = " ".join(result.error.split())
             print(f"impedance-cosim {args.command}: error: {stem}: {error};"
-                  f" {len(result.data)} rows kept in {path}", file=sys.stderr)  # fmt: skip
+                  f" {len(result.data)} rows kept in {kept}", file=sys.stderr)  # fmt: skip
         return result
 
     figures: list[Path] = []  # the figures this command wrote, for report.html
+    status = None
     try:
-        return _scenarios_and_figures(args, system, overrides, out, run, runs, figures, written)
+        status = _scenarios_and_figures(args, system, overrides, stage, run, runs, figures,
+                                        written)  # fmt: skip
+        return status
     finally:
-        if runs:  # a run started: the folder now describes this command alone
+        done = status in (0, 3)  # completed (a diverged run is a result): replaces the earlier
+        error = sys.exc_info()[1]
+        suffix = "" if done else PARTIAL
+        moved = settle(stage, out, done)
+        figures[:] = [out / moved[f.name] for f in figures if f.name in moved]
+        if done and runs:  # the folder now describes this command alone
             remove_stale(args, out, system, [*written, *figures])
+        if not done and moved:
+            print(f"kept as {PARTIAL} (the command did not complete; earlier results in {out}/"
+                  f" are as they were): {', '.join(sorted(moved.values()))}")  # fmt: skip
+        for entry in runs:  # the names the files have now
+            if "results" in entry and not done:
+                entry["results"]["file"] += PARTIAL
+            if entry.get("csv") and not done:
+                entry["csv"] += PARTIAL
+        renamed(error, stage, out)
         record = provenance.record(runs, started, time.perf_counter() - t0,
                                    command=args.command_line, ssp=ssp)  # fmt: skip
+        record = json.loads(json.dumps(record).replace(_json(stage), _json(out)))
         try:  # never in place of the run's own error (this is a finally)
-            provenance.write(out / "run.json", record)
+            provenance.write(out / ("run.json" + suffix), record)
         except OSError as exc:
-            print(f"impedance-cosim {args.command}: warning: {out / 'run.json'} not written:"
-                  f" {exc.strerror or exc}", file=sys.stderr)  # fmt: skip
+            print(f"impedance-cosim {args.command}: warning: {out / ('run.json' + suffix)} not"
+                  f" written: {exc.strerror or exc}", file=sys.stderr)  # fmt: skip
         if not getattr(args, "no_report", False):
             from impedance_cosim.apps import report
 
-            if page := report.write_run_report(out, record, figures, sys.exc_info()[1]):
+            if page := report.write_run_report(out, record, figures, error, suffix):
                 print(f"report: {page}")
 
 
-def _run_into(master, stream, path: Path, progress: bool, overrides: dict, runs: list,
+PARTIAL = ".partial"  # the suffix of what a command that did not complete kept
+
+
+def staging_folder(out: Path) -> Path:
+    """A new, empty `.staging-<pid>` folder in out (one left by an earlier process of this pid,
+    which cannot be running: out is locked, is removed)."""
+    from impedance_cosim.util.atomic import write_error
+
+    stage = out / f".staging-{os.getpid()}"
+    try:
+        if stage.exists():
+            shutil.rmtree(stage)
+        stage.mkdir()
+    except OSError as exc:
+        raise write_error(stage, exc) from None
+    return stage
+
+
+def settle(stage: Path, out: Path, done: bool) -> dict[str, str]:
+    """Move what the command wrote from stage into out: under its own name when the command
+    completed (replacing an earlier file), as `<name>.partial` otherwise (an earlier file of the
+    name stays); the staging folder is then removed. Returns {staged name: name in out}."""
+    moved = {}
+    for f in sorted(stage.iterdir()):
+        keep = done or f.name.endswith(PARTIAL) or f.name.startswith(".")  # .*.tmp: as named
+        name = f.name if keep else f.name + PARTIAL
+        try:
+            os.replace(f, out / name)
+        except OSError as exc:  # never in place of the command's own error: left where it is
+            print(f"impedance-cosim: warning: {f} not moved to {out / name}:"
+                  f" {exc.strerror or exc}", file=sys.stderr)  # fmt: skip
+            continue
+        moved[f.name] = name
+    with contextlib.suppress(OSError):
+        stage.rmdir()
+    return moved
+
+
+def _json(path: Path) -> str:
+    """path as it appears inside a JSON string."""
+    return json.dumps(str(path))[1:-1]
+
+
+def renamed(error: BaseException | None, stage: Path, out: Path) -> None:
+    """The error's text naming out, not the staging folder its files were moved from."""
+    if error is None:
+        return
+    error.args = tuple(a.replace(str(stage), str(out)) if isinstance(a, str) else a
+                       for a in error.args)  # fmt: skip
+    for attr in ("message", "note"):
+        if isinstance(getattr(error, attr, None), str):
+            setattr(error, attr, getattr(error, attr).replace(str(stage), str(out)))
+
+
+def _run_into(master, stream, kept: Path, progress: bool, overrides: dict, runs: list,
               written: list):  # fmt: skip
     """Run the master into the results stream and close it; its entry goes to `runs` on every
-    exit path (interrupted or failed, also while the file is written at the end)."""
+    exit path (interrupted or failed, also while the file is written at the end; kept: where
+    its rows are then)."""
     from impedance_cosim.util.atomic import WriteError
     from impedance_cosim.util.interrupt import RunInterrupted, signal_name
 
@@ -198,24 +280,25 @@ def _run_into(master, stream, path: Path, progress: bool, overrides: dict, runs:
             try:
                 result = master.run(progress=progress and stderr, sink=stream.write)
             except RunInterrupted as exc:
-                exc.message += f"; {stream.rows} rows kept in {path}"
+                exc.message += f"; {stream.rows} rows kept in {kept}"
                 raise
             finally:
                 echo_fmu_output(fmu_output.getvalue(), stderr)
     except (KeyboardInterrupt, WriteError) as exc:  # e.g. a full disk: the message says where
         if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, RunInterrupted):
             signum = getattr(exc, "signum", signal.SIGINT)  # while the file was closed
-            message = f"interrupted ({signal_name(signum)}); {stream.rows} rows kept in {path}"
+            message = f"interrupted ({signal_name(signum)}); {stream.rows} rows kept in {kept}"
             exc = RunInterrupted(message, signum)
         status = "interrupted" if isinstance(exc, RunInterrupted) else "failed"
-        entry = provenance.run_entry(master, result, overrides, path, status)
+        entry = provenance.run_entry(master, result, overrides, stream.path, status)
         message = exc.message if isinstance(exc, RunInterrupted) else str(exc)
         runs.append({"rows": stream.rows, **entry, "error": message})
-        written.append(path)
+        written.append(stream.path)
         raise exc from None
-    written.append(path)
-    fmt = "csv" if path.suffix == ".csv" else "mat"
-    runs.append(provenance.run_entry(master, result, overrides, path if fmt == "csv" else None))
+    written.append(stream.path)
+    fmt = "csv" if stream.path.suffix == ".csv" else "mat"
+    csv = stream.path if fmt == "csv" else None
+    runs.append(provenance.run_entry(master, result, overrides, csv))
     return result
 
 
@@ -224,6 +307,7 @@ FIG4_COMPARISON = "Fig. 4 comparison"  # the role of the runs under the paper's 
 
 def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: list,
                            figures: list, written: list) -> int:  # fmt: skip
+    # out: the staging folder (settle() moves what is written there into the results folder)
     """The main scenario, its summary and figures, and its Fig. 4 pair (for `run` under
     sample-and-hold also the pair under one sample of delay, the paper's Fig. 4). Exit status
     (results.exit_status) from the runs asked for: 1 failed, 3 diverged, 0 ok."""
@@ -272,7 +356,7 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
                 rows.append((analysis.condition_label("jacobi", overrides), *delayed.values()))
         fig4 = out / "fig4_observer_vs_difference.png"
         figures.append(_figure(analysis.figure_4, fig4, rows))
-    print(f"figures in {out}/")
+    print(f"figures in {out.parent}/")
     return exit_status([r.status for r in asked])
 
 
@@ -302,6 +386,7 @@ def remove_stale(args: argparse.Namespace, out: Path, system, owned: list[Path])
         names |= {f"{ps}_summary.json"}
         for fmt in ("csv", "mat"):
             names |= {f"{ps}.{fmt}", f"{ps}-jacobi.{fmt}", f"{ps}-gauss-seidel.{fmt}"}
+    names |= {n + PARTIAL for n in [*names, "run.json", "report.html"]}  # of a failed command
     keep = {p.name for p in owned}
     removed = []
     for name in sorted(names - keep):

@@ -20,6 +20,9 @@ DEFAULT_PLOTS = (
 )
 
 
+NO_VALUE = "0.85"  # the colour of a cell without a value (never black: black is "not bounded")
+
+
 def save_figure(fig: Any, path: Path, **kwargs: Any) -> None:
     """fig.savefig to a temporary name beside path, then renamed into place."""
     from impedance_cosim.util.atomic import atomic_path
@@ -51,7 +54,9 @@ def plot_map(
 ) -> None:
     """One metric over the swept axes: a curve (one axis), heatmaps (x = axes[0], y = axes[1],
     panel rows = axes[2], panel columns = axes[3]) or a scatter (random sweeps). Runs that did not
-    stay bounded are black cells / red crosses labelled with the time they stopped."""
+    stay bounded are black cells / red crosses labelled with the time they stopped; a bounded run
+    without a value of the metric (e.g. no contact before the stop time) is a grey hatched cell
+    labelled "-", never the colour of "not bounded"."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -150,8 +155,10 @@ def plot_map(
         squeeze=False,
         constrained_layout=True,
     )
+    from matplotlib.patches import Rectangle
+
     cmap = matplotlib.colormaps["viridis"].with_extremes(bad="black")
-    image = None
+    image, missing, unbounded = None, False, False
     annotate = len(xs) <= 14 and len(ys) <= 12
     for ri, rv in enumerate(rvals):
         for ci, cv in enumerate(cvals):
@@ -164,21 +171,27 @@ def plot_map(
             ]
             m = np.full((len(ys), len(xs)), np.nan)
             text: dict[tuple[int, int], tuple[str, str]] = {}
+            novalue = np.ones((len(ys), len(xs)), dtype=bool)  # no run here has a value
             xi = {label(v): i for i, v in enumerate(xs)}
             yi = {label(v): i for i, v in enumerate(ys)}
             for r in sel:
                 j, i = xi[label(r[x])], yi[label(r[y])]
                 if r.get("status") == "ok" and r.get(metric) is not None:
-                    m[i, j] = r[metric]
+                    m[i, j], novalue[i, j] = r[metric], False
                     text[i, j] = (f"{r[metric]:.3g}", "white")
                 elif r.get("status") == "ok":
-                    text[i, j] = ("-", "0.5")
+                    text[i, j] = ("-", "0.3")
                 else:
+                    novalue[i, j], unbounded = False, True
                     t_end = r.get("t_end_s")
                     text[i, j] = (f"{t_end:.2g}s" if t_end is not None else "fail", "#ff8080")
                     m[i, j] = np.nan
             masked = np.ma.masked_invalid(m)
             image = ax.imshow(masked, origin="lower", aspect="auto", cmap=cmap, norm=norm)
+            for i, j in zip(*np.nonzero(novalue), strict=True):  # grey, hatched: no value
+                missing = True
+                ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor=NO_VALUE,
+                                       edgecolor="0.6", hatch="//", lw=0))  # fmt: skip
             if annotate:
                 for (i, j), (s, colour) in text.items():
                     ax.text(j, i, s, ha="center", va="center", fontsize=7, color=colour)
@@ -189,7 +202,10 @@ def plot_map(
             parts = [f"{_short(prow)}={label(rv)}" if prow else "",
                      f"{_short(pcol)}={label(cv)}" if pcol else ""]  # fmt: skip
             ax.set_title(", ".join(p for p in parts if p), fontsize=9)
-    fig.suptitle(f"{title}\nblack, label in red: not bounded (stopped at that time)", fontsize=10)
+    keys = ["black, label in red: not bounded (stopped at that time)"] if unbounded else []
+    if missing:
+        keys.append('grey, hatched, "-": no value (e.g. no contact before the stop time)')
+    fig.suptitle("\n".join([title, *keys]), fontsize=10)
     if image is not None:
         fig.colorbar(image, ax=grid, label=what, shrink=0.8)
     save_figure(fig, path, dpi=100)

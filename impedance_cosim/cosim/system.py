@@ -98,11 +98,9 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "measured": {**PAPER_PARAMETERS, "controller.velocity_source": "measured"},
 }
 DEFAULT_SCENARIO = "observer"  # the scenario of SystemStructure.ssd (SSP's default variant)
-# The scenario switch controller.velocity_source (an enumeration of the variable table). True:
-# the SSD and SSV files type it as an SSP Enumeration (value = item name); False: as an Integer
-# (the item's value), as the FMUs declare it (see FMI_ENUMERATIONS in fmi/variables.py: libcosim
-# aborts on SSP Enumeration types).
-SSV_ENUMERATIONS = False
+# The scenario switch controller.velocity_source (an enumeration of the variable table) is an
+# SSP Integer (the item's value) in the SSD and SSV files, as the FMUs declare it: libcosim aborts
+# on SSP Enumeration types (see fmi/variables.py).
 SCENARIO_DESCRIPTIONS = {
     "observer": "The paper's run: joint velocity from the reduced-order observer, eq. (9)",
     "difference": "Fig. 4 baseline: backward difference of the measured joint angles",
@@ -118,18 +116,9 @@ def _type_element(parent: ET.Element, prefix: str, v: Variable, value: Any = Non
     attrs = {} if value is None else {"value": _literal(value)}
     if v.type == "Real" and v.unit:
         attrs["unit"] = v.unit
-    if v.enumeration and SSV_ENUMERATIONS:
-        attrs["name"] = v.enumeration.name
-        if value is not None and prefix == "ssv":
-            del attrs["name"]
-            attrs["value"] = value if isinstance(value, str) else v.enumeration.item(value)
-    elif v.enumeration and value is not None:
+    if v.enumeration and value is not None:
         attrs["value"] = str(v.enumeration.value(value) if isinstance(value, str) else value)
-    ET.SubElement(parent, _q(prefix, _ssp_type(v)), attrs)
-
-
-def _ssp_type(v: Variable) -> str:
-    return "Enumeration" if v.enumeration and SSV_ENUMERATIONS else v.type
+    ET.SubElement(parent, _q(prefix, v.type), attrs)
 
 
 def _literal(value: Any) -> str:
@@ -179,7 +168,6 @@ def ssd_xml(scenario: str = "observer") -> bytes:
     )
     elements = ET.SubElement(system, _q("ssd", "Elements"))
     used_units: set[str] = set()
-    enumerations = {}
     for comp in sorted(COMPONENTS, key=lambda c: SSD_ELEMENT_ORDER.index(c.name)):
         el = ET.SubElement(
             elements,
@@ -200,8 +188,6 @@ def ssd_xml(scenario: str = "observer") -> bytes:
             _type_element(c, "ssc", v)
             if v.unit and v.type == "Real":
                 used_units.add(v.unit)
-            if v.enumeration:
-                enumerations[v.enumeration.name] = v.enumeration
         bindings = ET.SubElement(el, _q("ssd", "ParameterBindings"))
         ET.SubElement(
             bindings,
@@ -209,8 +195,6 @@ def ssd_xml(scenario: str = "observer") -> bytes:
             {"source": f"resources/{ssv_name(scenario, comp.name)}"},
         )
     connections_element(system)
-    if SSV_ENUMERATIONS:
-        _enumerations(root, "ssd", enumerations.values())
     _units(root, "ssd", used_units)
     experiment_element(root)
     ET.indent(root)
@@ -250,18 +234,6 @@ def experiment_element(root: ET.Element) -> None:
     )
 
 
-def _enumerations(root: ET.Element, prefix: str, enums: Any) -> None:
-    enums = list(enums)
-    if not enums:
-        return
-    parent = ET.SubElement(root, _q(prefix, "Enumerations"))
-    for e in enums:
-        el = ET.SubElement(parent, _q("ssc", "Enumeration"),
-                           {"name": e.name, "description": e.description})  # fmt: skip
-        for k, (name, _) in enumerate(e.items, 1):
-            ET.SubElement(el, _q("ssc", "Item"), {"name": name, "value": str(k)})
-
-
 def _units(root: ET.Element, prefix: str, used: set[str]) -> None:
     units = ET.SubElement(root, _q(prefix, "Units"))
     for u in sorted(used):
@@ -278,7 +250,6 @@ def ssv_xml(scenario: str, component: str) -> bytes:
     )  # fmt: skip
     params = ET.SubElement(root, _q("ssv", "Parameters"))
     used_units: set[str] = set()
-    enumerations = {}
     for pname, value in SCENARIOS[scenario].items():
         if not pname.startswith(component + "."):
             continue
@@ -287,10 +258,6 @@ def ssv_xml(scenario: str, component: str) -> bytes:
         _type_element(p, "ssv", v, value)
         if v.type == "Real" and v.unit:
             used_units.add(v.unit)
-        if v.enumeration:
-            enumerations[v.enumeration.name] = v.enumeration
-    if SSV_ENUMERATIONS:
-        _enumerations(root, "ssv", enumerations.values())
     _units(root, "ssv", used_units)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"

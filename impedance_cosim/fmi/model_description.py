@@ -9,7 +9,6 @@ import xml.etree.ElementTree as ET
 
 from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
 from impedance_cosim.fmi.variables import (
-    FMI_ENUMERATIONS,
     METADATA,
     SAMPLED_INPUTS,
     ModelExchange,
@@ -128,8 +127,7 @@ def model_description(
         type_attrs: dict[str, str] = {}
         if v.enumeration:
             type_attrs["declaredType"] = v.enumeration.name
-            if not FMI_ENUMERATIONS:
-                type_attrs.update(min="1", max=str(len(v.enumeration.items)))
+            type_attrs.update(min="1", max=str(len(v.enumeration.items)))
         if v.unit and v.type == "Real":
             type_attrs["declaredType"] = QUANTITIES[v.unit]
         if v.derivative:
@@ -144,7 +142,7 @@ def model_description(
             type_attrs["max"] = xml_value(v.max)
         if v.causality not in ("output", "local"):
             type_attrs["start"] = xml_value(v.start)
-        ET.SubElement(sv, v.fmi_type, type_attrs)
+        ET.SubElement(sv, v.type, type_attrs)
     ms = ET.SubElement(root, "ModelStructure")
     outs = ET.SubElement(ms, "Outputs")
     if output_dependencies == "" and model_exchange:
@@ -200,16 +198,10 @@ def _type_definitions(root: ET.Element, units: list[str], variables: list[Variab
             attrs["displayUnit"] = DISPLAY_UNITS[u][0]
         ET.SubElement(ET.SubElement(types, "SimpleType", {"name": QUANTITIES[u]}), "Real", attrs)
     enums = {v.enumeration.name: v.enumeration for v in variables if v.enumeration}
-    for e in enums.values():
-        if not FMI_ENUMERATIONS:  # an Integer type documenting the values
-            text = f"{e.description}: {e.choices()}"
-            st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": text})
-            ET.SubElement(st, "Integer", {"min": "1", "max": str(len(e.items))})
-            continue
-        st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": e.description})
-        items = ET.SubElement(st, "Enumeration")
-        for k, (name, text) in enumerate(e.items, 1):
-            ET.SubElement(items, "Item", {"name": name, "value": str(k), "description": text})
+    for e in enums.values():  # an Integer type documenting the values (fmi/variables.py)
+        text = f"{e.description}: {e.choices()}"
+        st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": text})
+        ET.SubElement(st, "Integer", {"min": "1", "max": str(len(e.items))})
 
 
 def xml_value(value: float | int | bool | str) -> str:

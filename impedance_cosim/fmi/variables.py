@@ -25,8 +25,8 @@ PYTHON_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
 # libcosim ignores FMI 2.0 Enumeration variables ("FMI 2.0 Enumeration variable type not
 # supported, variable ... will be ignored", so an SSP binding cannot reach it) and aborts the
 # process on an SSP Enumeration connector or value ("Don't know how to handle Enumeration type").
-# So False: an Integer with min/max and a declared type whose description lists the items.
-FMI_ENUMERATIONS = False
+# So an enumeration is declared an Integer with min/max and a declared type whose description
+# lists the items (model_description.py).
 ENUMERATIONS: dict[str, Enumeration] = {}  # every Enumeration defined, by type name
 
 
@@ -79,12 +79,6 @@ class Variable:
         """Value type (Real, Integer, Boolean, String) from the start value's Python type: how
         the value is got and set (an Enumeration through Integer)."""
         return PYTHON_TYPES[type(self.start)]
-
-    @property
-    def fmi_type(self) -> str:
-        """FMI type element of the modelDescription: Enumeration for an enumeration (if
-        FMI_ENUMERATIONS), else type."""
-        return "Enumeration" if self.enumeration and FMI_ENUMERATIONS else self.type
 
     @property
     def fmi_variability(self) -> str:

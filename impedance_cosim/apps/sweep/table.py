@@ -59,14 +59,6 @@ def replace_text(path: Path, text: str) -> None:
         os.fsync(f.fileno())
 
 
-def write_table(path: Path, names: Sequence[str], rows: Iterable[dict]) -> None:
-    """A whole table (rows numbered 1.. in order, or by their own "run") via a temporary file."""
-    lines = [_csv_line(names)]
-    for i, row in enumerate(rows, start=1):
-        lines.append(_csv_line(row_cells(names, row.get("run") or i, row)))
-    replace_text(Path(path), "".join(lines))
-
-
 def read_table(path: Path) -> list[dict]:
     """Rows of a sweep table (numbers parsed, empty cells None)."""
     with open(path, newline="") as f:

@@ -398,7 +398,7 @@ def test_malformed_parameter_set_names_the_file(archive, tmp_path):
             b'<ssv:Parameter name="wall_k"',
             b'<ssv:Parameter name="wall_kk"',
             "unknown parameter plant.wall_kk in parameter set 'observer'; did you mean"
-            " plant.wall_k?",
+            " plant.wall_k, plant.wall_x, plant.wall_d?",
         ),
     ],
 )

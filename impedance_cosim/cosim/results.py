@@ -218,14 +218,20 @@ class CsvStream:
         if not self.keep_partial or not rows:
             atomic.discard(tmp)
             return exc
+        partial = self._keep_partial(tmp)
+        note = f"the {rows} whole rows that fit (to t={last:.9g} s) are in {partial}"
+        return exc.with_note(note)
+
+    def _keep_partial(self, tmp: Path) -> Path:
+        """Move the temporary file of rows to <target>.partial (or leave it where it is if
+        that fails); where the rows now are."""
         partial = self.path.with_name(self.path.name + ".partial")
         try:
             atomic.replace(tmp, partial)
         except OSError:
             atomic.keep(tmp)
             partial = tmp
-        note = f"the {rows} whole rows that fit (to t={last:.9g} s) are in {partial}"
-        return exc.with_note(note)
+        return partial
 
     def close(self) -> None:
         """Rename the rows written so far into place (nothing at all if no header was written)."""
@@ -242,13 +248,7 @@ class CsvStream:
             if not self.keep_partial:
                 atomic.discard(tmp)
                 raise atomic.write_error(self.path, exc) from None
-            partial = self.path.with_name(self.path.name + ".partial")
-            try:
-                atomic.replace(tmp, partial)
-            except OSError:
-                atomic.keep(tmp)
-                partial = tmp
-            note = f"the {self.rows} rows are in {partial}"
+            note = f"the {self.rows} rows are in {self._keep_partial(tmp)}"
             raise atomic.write_error(self.path, exc, note) from None
         except KeyboardInterrupt:  # the rows are whole: in place first, then stop
             if tmp.exists():

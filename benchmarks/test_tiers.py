@@ -51,9 +51,17 @@ def covered(args: list[str], data: Path) -> dict[str, set[int]]:
     env = {**os.environ, "COVERAGE_RCFILE": str(rc)}
     cmd = [sys.executable, "-m", "coverage", "run", f"--rcfile={rc}", "-m", "pytest", "-q",
            "-p", "no:cacheprovider", *args]  # fmt: skip
-    subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)
+    done = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)
+    if done.returncode != 0:  # the share would be of a broken run: say so
+        print(f"coverage run {' '.join(args)} failed:\n{done.stdout[-3000:]}{done.stderr[-3000:]}",
+              file=sys.stderr)  # fmt: skip
     subprocess.run([sys.executable, "-m", "coverage", "combine", f"--rcfile={rc}"], cwd=REPO,
                    env=env, capture_output=True, text=True)  # fmt: skip
+    return lines_of(data)
+
+
+def lines_of(data: Path) -> dict[str, set[int]]:
+    """The executed lines per file of a combined coverage data file."""
     import coverage
 
     cov = coverage.Coverage(data_file=str(data))
@@ -67,6 +75,8 @@ def main() -> None:
     parser.add_argument("--tiers", default="fast,full,coverage")
     parser.add_argument("--workers", default="2", help="pytest-xdist -n (0: one process)")
     parser.add_argument("--busy", type=int, default=0, help="busy processes beside the tests")
+    parser.add_argument("--data", default=None, help="keep the coverage data in this folder and"
+                        " reuse a full-suite measurement found there")  # fmt: skip
     args = parser.parse_args()
     tiers = args.tiers.split(",")
     xdist = ["-n", args.workers] if args.workers != "0" else []
@@ -84,8 +94,11 @@ def main() -> None:
             print(f"full suite: {seconds:.0f} s ({summary})")
         if "coverage" in tiers:
             with tempfile.TemporaryDirectory() as tmp:
-                fast = covered(["-m", "not slow", *xdist], Path(tmp) / "fast")
-                full = covered(xdist, Path(tmp) / "full")
+                folder = Path(args.data or tmp)
+                folder.mkdir(parents=True, exist_ok=True)
+                fast = covered(["-m", "not slow", *xdist], folder / "fast")
+                reuse = args.data is not None and (folder / "full").is_file()
+                full = lines_of(folder / "full") if reuse else covered(xdist, folder / "full")
             total = sum(len(v) for v in full.values())
             kept = sum(len(v & fast.get(f, set())) for f, v in full.items())
             unseen = sorted(Path(f).relative_to(REPO).as_posix() for f in full

@@ -271,7 +271,7 @@ def _system(ssp: str | Path | None) -> Iterator[tuple[SystemDescription, Path]]:
         raise ValueError(f"ssp must be a path to a .ssp archive (got {ssp!r})")
     path = Path(ssp) if ssp is not None else DEFAULT_SSP
     if ssp is None:  # the build's report goes to stderr: stdout is the caller's
-        from impedance_cosim.apps.run import ensure_built
+        from impedance_cosim.apps.build_cmd import ensure_built
 
         with contextlib.redirect_stdout(sys.stderr):
             ensure_built(argparse.Namespace(ssp=None), path)

@@ -72,7 +72,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def add_build(sub) -> None:
     """The `build` subcommand."""
-    from impedance_cosim.apps import run as run_cmd
+    from impedance_cosim.apps import build_cmd
     from impedance_cosim.apps.options import REPO
 
     p = sub.add_parser("build", help=COMMANDS["build"][0])
@@ -82,7 +82,7 @@ def add_build(sub) -> None:
                    choices=["plant", "controller", "bridge", "pinocchio", "mujoco", "closedloop"],
                    help="build only this FMU (repeatable; skips the .ssp; closedloop: the"
                    " closed-loop FMUs)")  # fmt: skip
-    p.set_defaults(func=run_cmd.cmd_build)
+    p.set_defaults(func=build_cmd.cmd_build)
 
 
 def add_run(sub) -> None:

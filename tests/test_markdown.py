@@ -126,7 +126,7 @@ def built() -> Path:
     """The checkout's fmus/, built once if an archive the pages use is missing or older than its
     Python sources (as `impedance-cosim run` decides; the pages' own `impedance-cosim build`
     rebuilds everything anyway)."""
-    from impedance_cosim.apps.run import stale
+    from impedance_cosim.apps.build_cmd import stale
 
     fmus = REPO / "fmus"
     names = ["PaperScenario.ssp", "PaperScenario-native.ssp", "PaperScenario-fmi3.ssp",
@@ -238,7 +238,7 @@ def test_setup_parts_are_what_ci_runs() -> None:
     steps = ["python3 -m venv .venv", ". .venv/bin/activate", 'pip install --quiet -e ".[dev]"']
     for step in steps:
         assert step in ci
-    assert re.search(r"^python -m pytest$", ci, re.M)
+    assert re.search(r"^python -m pytest -n auto --durations=25$", ci, re.M)
 
 
 # Links ------------------------------------------------------------------------------------------

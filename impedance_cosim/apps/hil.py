@@ -157,6 +157,7 @@ def _session_key(token_file: str | None) -> bytes:
 
 def _cmd_swap(args: argparse.Namespace) -> int:
     from impedance_cosim.apps import options, run
+    from impedance_cosim.apps.build_cmd import ensure_built
     from impedance_cosim.cosim.ssp import read_ssp
 
     replace = {}
@@ -175,7 +176,7 @@ def _cmd_swap(args: argparse.Namespace) -> int:
             except ValueError as exc:
                 raise options.CliError(f"--set {name}: {exc}") from None
     ssp = Path(args.ssp) if args.ssp else options.DEFAULT_SSP
-    run.ensure_built(args, ssp)
+    ensure_built(args, ssp)
     args.ssp = str(ssp)
     problems = []
     with read_ssp(ssp) as system:

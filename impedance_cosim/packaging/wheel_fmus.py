@@ -13,8 +13,8 @@ SUFFIXES = (".fmu", ".ssp")
 ROBOT = "robot"  # the arm's URDF and MJCF (small text files)
 # What a complete build has (build_all with a C compiler): without them the wheel is refused.
 REQUIRED = ("PaperScenario.ssp", "PaperScenario-native.ssp", "native/PumaPlant.fmu", "fmi3")
-# What the archives are built from (a superset of what run.stale checks: also the C sources and
-# the whole build code); the commands (apps) are not in the FMUs.
+# What the archives are built from (a superset of what build_cmd.stale checks: also the C sources
+# and the whole build code); the commands (apps) are not in the FMUs.
 SOURCES = (
     *(f"impedance_cosim/{name}" for name in ("__init__.py", "version.py", "physics", "fmi")),
     *(f"impedance_cosim/cosim/{name}" for name in ("system.py", "system2.py")),

@@ -374,7 +374,7 @@ def archive_payload(ssp: Path) -> tuple[bytes, str]:
 
 def default_ssp() -> Path:
     """The native system archive, built first if missing or older than its sources."""
-    from impedance_cosim.apps.run import stale
+    from impedance_cosim.apps.build_cmd import stale
 
     if DEFAULT_SSP.parent != PACKAGED_FMUS and stale(DEFAULT_SSP):  # an install's: as shipped
         from impedance_cosim.packaging.build_all import build_all

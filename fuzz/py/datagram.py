@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Fuzz target: the bridge protocol's datagram decoder (bridge_model/protocol.py), as the robot
 and the bridge run it on every datagram they receive: header_problem, then Message (MAC,
 fields). Only ProtocolError (AuthenticationError is one) may come out.

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Fuzz target: the SSP 1.0 reader (read_ssp on PaperScenario-native.ssp with one .ssd or .ssv
 replaced by the fuzz bytes; see _ssp.py)."""
 

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Fuzz target: the SSP 2.0 reader (read_ssp on PaperScenario-fmi3-ssp2.ssp with one .ssd or .ssv
 replaced by the fuzz bytes; see _ssp.py)."""
 

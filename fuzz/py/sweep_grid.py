@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Fuzz target: the sweep's --grid / --random item parser (impedance_cosim/apps/sweep/plan.py
 parse_axis, parse_value). Only SweepError may come out, with a message; a grid is a
 non-empty list of at most MAX_RUNS values, a range two finite ordered bounds."""

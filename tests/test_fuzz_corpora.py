@@ -34,7 +34,8 @@ def test_every_target_has_a_corpus():
     for name in [*targets.C_TARGETS, *targets.PY_TARGETS]:
         files = targets.corpus(name)
         assert files, f"fuzz/corpus/{name}/ is empty"
-        assert len(files) <= 60, f"fuzz/corpus/{name}/: {len(files)} files (minimize: -merge=1)"
+        limit = 150 if "_calls_" in name else 60  # call sequences: ~100 files of ~130 bytes
+        assert len(files) <= limit, f"fuzz/corpus/{name}/: {len(files)} files (-merge=1 them)"
 
 
 @pytest.mark.parametrize("name", targets.PY_TARGETS)

@@ -177,6 +177,8 @@ class PlantModel(FmuModel):
             raise ModelError(f"initial pose: {exc}") from None
         except ValueError as exc:
             raise ModelError(str(exc)) from None
+        except ArithmeticError as exc:  # finite but huge: the arm's terms overflow (fuzz finding)
+            raise ModelError(f"the parameters are out of range: {exc}") from None
         self.t = float(start_time)
         self.q = q
         self.qd = (0.0, 0.0, 0.0)

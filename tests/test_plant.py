@@ -174,3 +174,11 @@ def test_diverging_input_fails_cleanly():
     with pytest.raises(ModelError, match="integration failed"):
         plant.do_step(0.0, 1.0, (1e300, -1e300, 1e300))
     assert plant.t == 0.0 and plant.qd == (0.0, 0.0, 0.0)  # state kept at the step's start
+
+
+def test_huge_finite_parameters_are_a_model_error_not_an_overflow():
+    """Fuzz finding (fuzz/corpus/robot_session/finding-init-overflow): an INIT whose rx2 is
+    7.4e181 made the arm's terms overflow, and the robot answered INTERNAL instead of REFUSED."""
+    params = {v.name: v.start for v in PlantModel.variables() if v.causality == "parameter"}
+    with pytest.raises(ModelError, match="out of range"):
+        PlantModel({**params, "rx2": 7.4e181}, 0.0)

@@ -7,7 +7,10 @@ Convention (also in the README's "The examples in these pages run in the tests")
   fmus/ (so ``--ssp fmus/...`` works and anything a command writes lands in the temporary folder).
   A command must exit 0, unless it ends in a comment ``# exits N: why``.
 - A fenced ```python block is run as one script (``python -c``) in such a folder; it must exit 0.
-- Other blocks (```text, ```console, plain ```) are output or pictures and are not run.
+- Other blocks (```text, ```console, plain ```) are output or pictures and are not run. A ```py
+  block is the listing of a file of the checkout (examples/own_robot.py in docs/hil.md): not run
+  here, its file is run by its own test (tests/test_examples.py, which also checks the listing).
+- The folder also has ``examples``, the checkout's examples/ (``python examples/own_robot.py``).
 - Setup that CI's ``.ci/run`` executes itself (making the venv, activating it, installing this
   package, running the whole suite) is not re-run: such leading ``&&`` parts are stripped from a
   command (SETUP below), and a block may be marked ``<!-- not run: why -->`` on the line before it
@@ -152,6 +155,7 @@ def workdir(tmp_path: Path, fmus: Path) -> Path:
     work = tmp_path / "work"
     work.mkdir()
     (work / "fmus").symlink_to(fmus)
+    (work / "examples").symlink_to(REPO / "examples")
     return work
 
 

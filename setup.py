@@ -1,8 +1,8 @@
 """The wheel carries the built FMUs and system archives (what `impedance-cosim build` writes into
 fmus/) as package data in impedance_cosim/_fmus, so that an installed wheel runs the paper's
-scenario without a C compiler (docs/fmus.md#installing-the-fmus-from-a-wheel). They are copied,
-not built, here: build them first (`impedance-cosim build`); IMPCOSIM_WHEEL_FMUS names another
-build folder. Everything else is in pyproject.toml."""
+scenario without a C compiler (docs/fmus-platforms.md#installing-the-fmus-from-a-wheel). They are
+copied, not built, here: build them first (`impedance-cosim build`); IMPCOSIM_WHEEL_FMUS names
+another build folder. Everything else is in pyproject.toml."""
 
 import importlib.util
 import os

@@ -3,7 +3,7 @@
 It simulates nothing. Initialization sends the plant parameters to the robot process (INIT) and
 takes its initial outputs from the reply; each do_step sends the torques (STEP, sequence number
 1, 2, ...) and returns the outputs the robot reports after the step. UDP, protocol in
-bridge_model/protocol.py (docs/hil.md).
+bridge_model/protocol.py (docs/hil-reference.md).
 
 Every message is signed with the session token (`robot_token_file`, or `robot_token`), and
 carries a session id the bridge draws at random for its INIT. A reply counts only if its MAC

@@ -40,7 +40,8 @@ The session token is a secret both ends get at start-up (never on a command line
 variable or a file only its owner can read, see read_token_file). A receiver drops, without any
 answer, datagrams that are too short or too long, whose MAC does not verify, or whose header is
 not this protocol version. A repeated request (same session and seq) gets the cached reply again;
-it never steps the robot twice. See docs/hil.md for the checks on each side and the trust model.
+it never steps the robot twice. See docs/hil-reference.md for the checks on each side and the
+trust model.
 """
 
 from __future__ import annotations

@@ -280,7 +280,7 @@ def test_a_robot_killed_mid_run_stops_the_run(system, bridge, robot, monkeypatch
 def test_a_robot_that_never_starts_fails_the_initialization(ssp_path, bridge):
     """In a child process: an error during initialization reaches the master as fmi2Fatal, after
     which pythonfmu 0.7 has corrupted the interpreter (a later garbage collection crashes it),
-    for every Python FMU (see the report in docs/hil.md)."""
+    for every Python FMU (see docs/limitations.md)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # free now, and nobody listens

@@ -7,7 +7,11 @@ Convention (also in the README's "The examples in these pages run in the tests")
   fmus/ (so ``--ssp fmus/...`` works and anything a command writes lands in the temporary folder).
   A command must exit 0, unless it ends in a comment ``# exits N: why``.
 - A fenced ```python block is run as one script (``python -c``) in such a folder; it must exit 0.
-- Other blocks (```text, ```console, plain ```) are output or pictures and are not run.
+- Other blocks (```text, ```console, plain ```) are output or pictures and are not run. A ```py
+  block is the listing of a file of the checkout (examples/own_robot.py in docs/hil.md): not run
+  here, its file is run by its own test (tests/test_examples.py, which also checks the listing).
+- The folder also has ``examples``, the checkout's examples/ (``python examples/own_robot.py``).
+- No page is longer than MAX_LINES: a longer one is split, guide apart from reference.
 - Setup that CI's ``.ci/run`` executes itself (making the venv, activating it, installing this
   package, running the whole suite) is not re-run: such leading ``&&`` parts are stripped from a
   command (SETUP below), and a block may be marked ``<!-- not run: why -->`` on the line before it
@@ -42,6 +46,7 @@ EXIT = re.compile(r"#\s*exits (\d+)\b")
 FENCE = re.compile(r"^```(\S*)\s*$")
 NOT_RUN = re.compile(r"^<!--\s*not run:\s*\S.*-->\s*$")
 TIMEOUT = 300  # s per command: an upper bound for a hang, not a duration check
+MAX_LINES = 300  # per page: a page a user can read to its end
 
 # At least this many are collected, so blocks cannot silently stop being run (e.g. a fence
 # renamed). Today exactly these many: change the numbers deliberately with the examples.
@@ -152,6 +157,7 @@ def workdir(tmp_path: Path, fmus: Path) -> Path:
     work = tmp_path / "work"
     work.mkdir()
     (work / "fmus").symlink_to(fmus)
+    (work / "examples").symlink_to(REPO / "examples")
     return work
 
 
@@ -224,6 +230,14 @@ def test_not_run_marks_only_setup() -> None:
             assert b.lang in ("sh", "python"), f"{b.id}: 'not run' on a block that never runs"
             rest = [c for c in commands(b) if strip_setup(c)]
             assert not rest, f"{b.id}: marked not run but has {rest}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO)) for p in PAGES])
+def test_no_page_is_longer_than_max_lines(page: Path) -> None:
+    """README.md and every docs/*.md page has at most MAX_LINES lines (split a longer one: the
+    guide on one page, the reference on another)."""
+    n = len(page.read_text().splitlines())
+    assert n <= MAX_LINES, f"{page.relative_to(REPO)} has {n} lines (at most {MAX_LINES})"
 
 
 def test_code_blocks_have_a_language() -> None:

@@ -140,11 +140,17 @@ def test_run_writes_a_self_contained_report(paper_run, ssp_path):
     assert ("impedance-cosim run: observer ok, difference ok; Fig. 4 comparison (jacobi):"
             " observer ok, difference diverged at t = 0.4825 s") in text  # fmt: skip
     assert page.row("command")[1].endswith(f"--stop 4.5 --out {paper_run} --no-progress")
-    runs = next(t for t in page.tables if t[0][0] == "scenario")
-    assert [r[:3] for r in runs[1:]] == [
-        ["observer", "ok", "1801"], ["difference", "ok", "1801"],
-        ["observer (Fig. 4 comparison)", "ok", "1801"],
-        ["difference (Fig. 4 comparison)", "diverged", "194"]]  # fmt: skip
+    runs = next(t for t in page.tables if t[0][0] == "run")
+    assert [r[:4] for r in runs[1:]] == [
+        ["observer", "ok", "", "1801"], ["difference", "ok", "", "1801"],
+        ["observer (Jacobi, Fig. 4 comparison)", "ok", "", "1801"],
+        ["difference (Jacobi, Fig. 4 comparison)", "diverged at t = 0.4825 s",
+         "controller.tau1 beyond 1e6 (-1.071e6)", "194"]]  # fmt: skip
+    # each parameter set once, naming the runs that used it
+    assert [t for t in page.text if t.startswith("Parameters in effect")] == [
+        "Parameters in effect: observer, observer (Jacobi, Fig. 4 comparison)",
+        "Parameters in effect: difference, difference (Jacobi, Fig. 4 comparison)",
+    ]
     # the summary against the paper, with this run's numbers
     summary = record["runs"][0]["summary"]
     assert page.row("contact force")[1:3] == ["19.6 N (10^4 N/m x 0.00196 m)", "section 5, Fig. 1d"]
@@ -245,6 +251,71 @@ def test_the_heading_states_each_runs_status():
     assert 'class="diverged">A run diverged (a result, exit status 3;' in page
     page = report.run_report({"command": command, "runs": [observer]}, error=OSError("disk"))
     assert "<h1>impedance-cosim run: observer ok, FAILED</h1>" in page
+
+
+RUNS_HEAD = ["run", "status", "error", "rows"]
+
+
+def _runs_table(text: str) -> list[list[str]]:
+    page = Page()
+    page.feed(text)
+    return next(t for t in page.tables if t[0][:4] == RUNS_HEAD)[1:]
+
+
+def _record() -> dict:
+    """A default run's record: the pair, and the pair again under Jacobi for Fig. 4."""
+    error = "diverged at t = 0.4825 s: controller.tau1 beyond 1e6 (-1.071e6)"
+    p_obs = {"controller": {"velocity_source": 1}}
+    p_dif = {"controller": {"velocity_source": 0}}
+    runs = [
+        {"scenario": "observer", "status": "ok", "rows": 8001, "algorithm": "gauss-seidel",
+         "parameters": p_obs, "summary": {}},
+        {"scenario": "difference", "status": "ok", "rows": 8001, "algorithm": "gauss-seidel",
+         "parameters": p_dif},
+        {"scenario": "observer", "status": "ok", "rows": 8001, "algorithm": "jacobi",
+         "role": "Fig. 4 comparison", "parameters": p_obs},
+        {"scenario": "difference", "status": "diverged", "rows": 194, "algorithm": "jacobi",
+         "role": "Fig. 4 comparison", "error": error, "parameters": p_dif},
+    ]  # fmt: skip
+    return {"command": ["impedance-cosim", "run"], "runs": runs}
+
+
+def test_the_runs_table_says_a_divergence_once():
+    """'diverged' once: the status cell says when, the error cell why (not 'diverged: diverged
+    at ...')."""
+    text = report.run_report(_record())
+    row = _runs_table(text)[3]
+    assert row[1:3] == ["diverged at t = 0.4825 s", "controller.tau1 beyond 1e6 (-1.071e6)"]
+    assert " ".join(row).count("diverged") == 1
+    assert "diverged: diverged" not in text
+
+
+def test_the_runs_for_fig4_are_labelled_with_their_algorithm_and_role():
+    rows = _runs_table(report.run_report(_record()))
+    assert [r[0] for r in rows] == ["observer", "difference",
+                                    "observer (Jacobi, Fig. 4 comparison)",
+                                    "difference (Jacobi, Fig. 4 comparison)"]  # fmt: skip
+
+
+def test_each_parameter_set_is_listed_once():
+    page = Page()
+    page.feed(report.run_report(_record()))
+    summaries = [t for t in page.text if t.startswith("Parameters in effect")]
+    assert summaries == [
+        "Parameters in effect: observer, observer (Jacobi, Fig. 4 comparison)",
+        "Parameters in effect: difference, difference (Jacobi, Fig. 4 comparison)",
+    ]
+
+
+def test_number_cells_do_not_wrap():
+    """Every cell that is one number has class "n", which the style sheet keeps on one line."""
+    text = report.run_report(_record())
+    assert "td.n{white-space:nowrap}" in html_page.STYLE
+    assert '<td class="n">8001</td>' in text and '<td class="n">194</td>' in text
+    assert html_page.table([], [["0.0025", "-1.5e6", "abc", "800/1", ""]]) == (
+        '<table><tbody><tr><td class="n">0.0025</td><td class="n">-1.5e6</td><td>abc</td>'
+        "<td>800/1</td><td></td></tr></tbody></table>"
+    )
 
 
 def test_a_report_that_cannot_be_written_is_one_line(ssp_path, tmp_path, capsys):

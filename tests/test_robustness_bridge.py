@@ -421,8 +421,8 @@ def test_a_non_loopback_bind_needs_allow_remote(host):
     assert code == 2 and out == "", (code, out, err)
     assert err.strip().splitlines() == [
         f"impedance-cosim robot: error: --host {host!r} would listen on every interface: other "
-        "machines could send datagrams here; give --allow-remote to accept that (docs/hil.md, "
-        "Trust model)"
+        "machines could send datagrams here; give --allow-remote to accept that "
+        "(docs/hil-reference.md, Trust model)"
     ]
     with pytest.raises(ValueError, match="--allow-remote"):
         RobotServer(KEY, host=host)  # the server itself refuses (an API user)

@@ -99,7 +99,8 @@ def _cmd_robot(args: argparse.Namespace) -> int:
         if not ipaddress.ip_address(host).is_loopback:  # only with --allow-remote
             print(f"robot: {host} is not a loopback address: every machine that can reach port"
                   f" {port} can send datagrams here (the token keeps them out; the traffic is not"
-                  " encrypted: docs/hil.md, Trust model)", file=sys.stderr, flush=True)  # fmt: skip
+                  " encrypted: docs/hil-reference.md, Trust model)",
+                  file=sys.stderr, flush=True)  # fmt: skip
         server.serve(duration)
     finally:
         server.close()
@@ -281,7 +282,7 @@ def add_parsers(sub) -> None:
     )
     p.add_argument("--allow-remote", action="store_true",
                    help="allow a --host other machines can reach ('' or 0.0.0.0: every "
-                        "interface); see docs/hil.md, Trust model")  # fmt: skip
+                        "interface); see docs/hil-reference.md, Trust model")  # fmt: skip
     p.add_argument("--port", default="50400", help="UDP port (default 50400; 0: a free one)")
     p.add_argument("--plant", choices=PLANTS, default="ours",
                    help="the plant it runs: ours (default) or mujoco (MuJoCo's, as in"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import re
 import struct
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,7 +26,7 @@ pre{white-space:pre-wrap;word-break:break-all;background:#f6f6f6;padding:.5rem}
 .failed{background:#fbe7e7;padding:.6rem;border-left:6px solid #c22;font-weight:600}
 .diverged{background:#fdf3dc;padding:.6rem;border-left:6px solid #d90;font-weight:600}
 figure{margin:1rem 1rem 1rem 0;display:inline-block;vertical-align:top}
-img{max-width:100%;height:auto;border:1px solid #ddd}"""
+img{max-width:100%;height:auto;border:1px solid #ddd}td.n{white-space:nowrap}"""
 
 
 # --- HTML pieces ------------------------------------------------------------------------------
@@ -35,10 +36,19 @@ def esc(value: Any) -> str:
     return html.escape(str(value), quote=True)
 
 
+# A cell that is one number (801, 0.0025, -1.5e6, 1.20): class "n", never wrapped mid-number.
+NUMBER = re.compile(r"-?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+
+
+def cell(value: Any) -> str:
+    text = esc(value)
+    return f'<td class="n">{text}</td>' if NUMBER.fullmatch(str(value)) else f"<td>{text}</td>"
+
+
 def table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     head = "".join(f"<th>{esc(h)}</th>" for h in header)
     head = f"<thead><tr>{head}</tr></thead>" if any(header) else ""
-    body = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in row) + "</tr>" for row in rows)
+    body = "".join("<tr>" + "".join(cell(c) for c in row) + "</tr>" for row in rows)
     return f"<table>{head}<tbody>{body}</tbody></table>"
 
 

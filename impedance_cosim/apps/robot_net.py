@@ -32,7 +32,7 @@ def listen(host: str, port: int, allow_remote: bool = False) -> socket.socket:
         which = "every interface" if address == "0.0.0.0" else f"{address}, not a loopback address"
         raise ValueError(
             f"--host {host!r} would listen on {which}: other machines could send datagrams here; "
-            "give --allow-remote to accept that (docs/hil.md, Trust model)"
+            "give --allow-remote to accept that (docs/hil-reference.md, Trust model)"
         )
     probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:

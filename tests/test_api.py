@@ -255,8 +255,8 @@ def test_report_is_the_cli_page_for_a_result(contact, ssp_path, tmp_path):
     for fmu in contact.provenance["runs"][0]["fmus"].values():
         assert fmu["sha256"] in text
     assert page.row("fmpy")[1] == contact.provenance["versions"]["fmpy"]
-    runs = next(t for t in page.tables if t[0][0] == "scenario")
-    assert [r[:3] for r in runs[1:]] == [["observer", "ok", "1801"]]
+    runs = next(t for t in page.tables if t[0][0] == "run")
+    assert [r[:4] for r in runs[1:]] == [["observer", "ok", "", "1801"]]
     # the units, as in the Result
     for name in ("plant.contact_force", "controller.tau1", "plant.x"):
         assert page.row(name) == [name, contact.units[name]]

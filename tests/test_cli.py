@@ -36,6 +36,7 @@ def test_options_reach_the_master(ssp_path, tmp_path):
     assert len(result) == 401 and np.array_equal(result["time"], np.arange(401) * 0.00125)
 
 
+@pytest.mark.slow
 def test_diverging_run_keeps_partial_results(ssp_path, tmp_path, capsys):
     out = tmp_path / "res"
     args = ["run", "--ssp", str(ssp_path), "--stop", "5", "--out", str(out), "--set"]

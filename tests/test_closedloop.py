@@ -135,6 +135,7 @@ def test_tunable_between_steps_fixed_refused(closed_loops):
 
 
 @pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.slow
 def test_validates_and_runs_under_fmpy_simulate(closed_loops, fmi, tmp_path):
     fmu = path_of(closed_loops, fmi, "observer")
     assert validate_fmu(str(fmu)) == []

@@ -51,6 +51,7 @@ def test_event_exact_run_stops_at_each_switch_and_keeps_the_sampled_rows(
     assert np.array_equal(exact.data, fixed.data)
 
 
+@pytest.mark.slow
 def test_run_cli_event_exact_writes_the_fixed_step_rows(fmu_dir, fmi3_dir, tmp_path):
     """`run --event-exact` over the first contact (3.85 s): the same CSV as the fixed step."""
     csvs = []

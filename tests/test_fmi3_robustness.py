@@ -264,6 +264,7 @@ def test_free_instance_inside_the_intermediate_update_is_refused(fmi3_dir, tmp_p
 
 
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
+@pytest.mark.slow
 def test_free_instance_inside_the_intermediate_update_under_valgrind(fmi3_dir, tmp_path):
     """The same under valgrind: no invalid read (of the freed instance), nothing leaked."""
     cmd = ["valgrind", "--leak-check=full", "--errors-for-leak-kinds=definite",

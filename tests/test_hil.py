@@ -215,6 +215,7 @@ def test_lockstep_bridge_equals_the_in_process_plant(system, bridge, robot):
     assert 0 < np.median(got["plant.link_rtt"][1:]) < 0.01
 
 
+@pytest.mark.slow
 def test_swap_to_the_bridge_is_one_command(ssp_path, tmp_path):
     out = tmp_path / "bridge"
     args = ["--ssp", str(ssp_path), "--stop", "1", "--no-figures"]

@@ -112,6 +112,7 @@ def test_overrides_and_vector_shorthand(ssp_path):
     assert master.parameters["plant"]["q_noise"] == 1e-5
 
 
+@pytest.mark.slow
 def test_diverging_run_stops_with_a_clear_message_and_partial_results(ssp_path):
     result = Master(read_ssp(ssp_path), overrides={"controller.G": 1e9}, stop_time=5.0).run()
     assert not result.ok

@@ -238,6 +238,7 @@ def test_model_exchange_call_rules(native_dir):
 # --- agreement with co-simulation ------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_default_experiment_agrees_with_co_simulation(native_dir, tmp_path):
     """fmpy simulate, CVode at the DefaultExperiment's tolerance (1e-9), against CS."""
     out = tmp_path / "me.csv"

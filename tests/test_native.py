@@ -50,6 +50,7 @@ def test_native_fmu_is_valid_with_sources(native_dir, fmu_dir, name):
 
 
 @pytest.mark.parametrize("name", [PLANT, CONTROLLER])
+@pytest.mark.slow
 def test_fmpy_simulate_native(native_dir, tmp_path, name):
     out = tmp_path / "out.csv"
     cmd = ["fmpy", "simulate", str(native_dir / name), "--output-interval", "0.0025"]

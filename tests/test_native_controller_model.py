@@ -286,6 +286,7 @@ def test_observer_discretizations(lib, plant_rows: np.ndarray, method: str, K: f
     assert np.abs(qd_obs - plant_rows[:-1, 6]).max() < 0.2  # the truth at the same sample
 
 
+@pytest.mark.slow
 def test_finer_master_step(lib, plant_rows: np.ndarray) -> None:
     """h = Ts / 10: a sample every tenth step, inputs held between the plant's rows."""
     n = (len(plant_rows) - 1) * 10

@@ -235,6 +235,7 @@ def test_model_state_is_plain_and_sized(lib):
     assert lib.data_size() > lib.state_size()
 
 
+@pytest.mark.slow
 def test_default_experiment_zero_torque(lib):
     nat_out, _, _ = check_run(lib, [(0.0, 0.0, 0.0)] * 8000)
     assert np.all(np.isfinite(nat_out))

@@ -68,6 +68,7 @@ def test_libcosim_matches_our_jacobi_master_to_1e_9(ssp_path, libcosim_run):
         assert np.allclose(values, ours[name], rtol=0, atol=1e-9), name
 
 
+@pytest.mark.slow
 def test_libcosim_is_bit_identical_to_our_jacobi_master_on_its_time_grid(ssp_path, libcosim_run):
     ours = master_run(ssp_path, "observer", STOP, libcosim_grid=True)
     for name, values in libcosim_run.items():

@@ -70,6 +70,7 @@ def _check_states(me: MeHost, contact: bool, seed: int) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("fmi3", [False, True], ids=["fmi2", "fmi3"])
+@pytest.mark.slow
 def test_me_directional_derivatives_match_finite_differences(native_dir, fmi3_dir, fmi3):
     """400 states (200 free, 200 in contact), every output and state derivative against every
     state and torque, on a damped wall. In contact the wall's stiffness dominates: dropping its

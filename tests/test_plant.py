@@ -77,6 +77,7 @@ def test_wall_force_law():
     assert wall_force(damped, 0.652, -1.0) == 0.0  # never pulls
 
 
+@pytest.mark.slow
 def test_contact_run_matches_tight_reference():
     """Contact closing and opening inside steps: the plant (rtol 1e-9) agrees with scipy DOP853
     (rtol 1e-10) and independent event handling to 1e-7 over 3 s."""

@@ -383,6 +383,7 @@ def test_sweep_writes_its_report(ssp_path, tmp_path):
     assert not (tmp_path / "b" / "report.html").exists() and (tmp_path / "b" / "sweep.csv").exists()
 
 
+@pytest.mark.slow
 def test_the_study_writes_a_page_per_map(native_ssp, tmp_path):
     """sweep --study: map_<name>.report.html beside each table, with its plots embedded, and the
     table's provenance (map_<name>.run.json)."""

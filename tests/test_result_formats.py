@@ -41,6 +41,7 @@ def test_random_bit_patterns_and_magnitudes_are_spelled_as_repr() -> None:
 
 
 @pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+@pytest.mark.slow
 def test_every_scenario_run_is_spelled_as_repr(native_ssp, algorithm: str) -> None:
     system = read_ssp(native_ssp)
     try:

@@ -29,6 +29,7 @@ def files(out: Path) -> dict[str, bytes]:
             if p.is_file() and not p.name.startswith(".")}  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_failed_run_leaves_the_earlier_files_as_they_were(native_ssp, tmp_path, capsys):
     """On main: the failed run removed 10 files of the earlier one (figures, the Fig. 4 runs,
     its summary) and wrote its own observer.csv, run.json and report.html over the earlier."""
@@ -52,6 +53,7 @@ def test_a_failed_run_leaves_the_earlier_files_as_they_were(native_ssp, tmp_path
     assert list(out.glob(".staging-*")) == []
 
 
+@pytest.mark.slow
 def test_a_failed_swap_leaves_the_earlier_swap_as_it_was(native_ssp, native_dir, tmp_path, capsys):
     """The issue's case: a good swap, then one that fails (there: MuJoCo not installed; here: a
     start pose out of reach) said "removed 6 file(s) of an earlier run from results/swap/"."""
@@ -67,6 +69,7 @@ def test_a_failed_swap_leaves_the_earlier_swap_as_it_was(native_ssp, native_dir,
     assert "observer.csv.partial" in after
 
 
+@pytest.mark.slow
 def test_a_failed_no_figures_run_keeps_the_earlier_figures(native_ssp, tmp_path):
     out = tmp_path / "res"
     assert run(native_ssp, out) == 0
@@ -76,6 +79,7 @@ def test_a_failed_no_figures_run_keeps_the_earlier_figures(native_ssp, tmp_path)
     assert {p.name: p.read_bytes() for p in out.glob("fig*.png")} == figures
 
 
+@pytest.mark.slow
 def test_an_interrupted_run_keeps_its_rows_as_partial_and_the_earlier_files(
     native_ssp, tmp_path, capsys, monkeypatch
 ):

@@ -190,6 +190,7 @@ def test_bad_input_gives_one_line(
     assert [r[0] for r in data] == pytest.approx([i * H for i in range(rows)])
 
 
+@pytest.mark.slow
 def test_swap_shares_the_checks(ssp_path, bad_archives, tmp_path):
     with zipfile.ZipFile(bad_archives["bad CRC"]) as z:
         bad = tmp_path / "PumaPlant.fmu"

@@ -375,6 +375,7 @@ def test_a_new_session_mid_run_fails_the_old_run(system, fmu_dir, robot):
     assert 20 < len(result.data) < 1601  # stopped when the INIT came (at about t = 0.5 s)
 
 
+@pytest.mark.slow
 def test_a_bridge_with_another_token_fails_initialization(ssp_path, fmu_dir, robot):
     """In a child process (an initialization error corrupts pythonfmu 0.7's interpreter): the
     robot drops every datagram of a bridge with another token; the bridge says so."""

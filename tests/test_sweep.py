@@ -262,6 +262,7 @@ def test_an_interrupted_api_sweep_keeps_its_finished_results(native_ssp, monkeyp
         assert exc.result is None
 
 
+@pytest.mark.slow
 def test_study_no_plots_draws_no_map_and_keeps_the_table(native_ssp, tmp_path):
     """sweep --study --no-plots (issue 24): no PNG (the maps were drawn after the runs, a serial
     tail), and the same table as the study with its maps, run for run (less wall_s)."""

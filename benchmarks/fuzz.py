@@ -3,13 +3,14 @@
     python benchmarks/fuzz.py --minutes N [--targets a,b] [--update-corpus]
 
 Runs every target (or those named) for N minutes EACH (N may be a fraction: 0.25 is 15 s), one
-after the other, nice'd, starting from its committed corpus fuzz/corpus/<target>/ (seeded with a
-few valid inputs when empty). C targets are libFuzzer binaries (clang -fsanitize=fuzzer,address,
-undefined) built from the native FMUs' shipped sources; Python targets run under atheris. Prints
-per target: executions, edges (libFuzzer's cov:) and features (ft:), and findings (crash, leak,
-timeout and out-of-memory files, kept in the work folder, default /tmp/impcosim-fuzz; see
-IMPCOSIM_FUZZ_WORK). --update-corpus merges what was found into the committed corpus, minimized
-with libFuzzer's -merge=1 (by edges: -use_counters=0). Exits 1 when there are findings."""
+after the other, nice'd (--nice), starting from its committed corpus fuzz/corpus/<target>/
+(seeded with a few valid inputs when empty). C targets are libFuzzer binaries (clang
+-fsanitize=fuzzer,address,undefined) built from the native FMUs' shipped sources; Python targets
+run under atheris. Prints per target: executions, edges (libFuzzer's cov:) and features (ft:),
+and findings (crash, leak, timeout and out-of-memory files, kept in the work folder, default
+/tmp/impcosim-fuzz; see IMPCOSIM_FUZZ_WORK). --update-corpus merges what was found into the
+committed corpus, minimized with libFuzzer's -merge=1 (by edges: -use_counters=0). Exits 1 when
+there are findings."""
 
 from __future__ import annotations
 
@@ -49,7 +50,9 @@ def stats(log: str) -> dict[str, str]:
     return found
 
 
-def run(name: str, seconds: int, work: Path, update: bool) -> tuple[dict[str, str], list[Path]]:
+def run(
+    name: str, seconds: int, work: Path, update: bool, niceness: int = 10
+) -> tuple[dict[str, str], list[Path]]:
     committed = targets.CORPUS / name
     if not targets.corpus(name):
         targets.write_seeds(name, committed, work)
@@ -58,7 +61,7 @@ def run(name: str, seconds: int, work: Path, update: bool) -> tuple[dict[str, st
     live.mkdir(parents=True, exist_ok=True)
     findings.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, IMPCOSIM_FUZZ_FMUS=str(targets.build_fmus(work / "fmus")))
-    cmd = ["nice", "-n", "10", *command(name, work), str(live), str(committed), *FLAGS]
+    cmd = ["nice", "-n", str(niceness), *command(name, work), str(live), str(committed), *FLAGS]
     cmd += [f"-max_total_time={seconds}", f"-artifact_prefix={findings}/"]
     done = subprocess.run(cmd, capture_output=True, text=True, env=env)
     (work / f"{name}.log").write_text(done.stdout + done.stderr)
@@ -81,6 +84,8 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, required=True, help="per target")
     parser.add_argument("--targets", help="comma-separated (default: all)")
     parser.add_argument("--update-corpus", action="store_true")
+    parser.add_argument("--nice", type=int, default=10, help="niceness of the fuzzers (default"
+                        " 10: beside other work; 0: as busy as anything else)")  # fmt: skip
     args = parser.parse_args()
     every = [*targets.C_TARGETS, *targets.PY_TARGETS]
     names = args.targets.split(",") if args.targets else every
@@ -94,7 +99,7 @@ def main() -> int:
     print(f"{'target':24} {'executions':>11} {'edges':>6} {'features':>8}  findings")
     total = 0
     for name in names:
-        found, crashes = run(name, seconds, work, args.update_corpus)
+        found, crashes = run(name, seconds, work, args.update_corpus, args.nice)
         total += len(crashes)
         print(f"{name:24} {found['execs']:>11} {found['cov']:>6} {found['ft']:>8}  "
               f"{len(crashes)} {' '.join(str(p) for p in crashes)}", flush=True)  # fmt: skip

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from impedance_cosim.packaging import cgen
@@ -86,3 +88,32 @@ def test_fused_forward_dynamics_is_the_sum_of_its_parts():
         cqd, grav, f = matvec(t.coriolis(q, qd), qd), t.gravity(q), (p.f1, p.f2, p.f3)
         rhs = tuple(tau[i] - cqd[i] - f[i] * qd[i] - grav[i] for i in range(3))
         assert repr(t.forward_dynamics(*q, *qd, *tau)) == repr(solve(t.inertia(q), rhs))
+
+
+def test_the_generators_on_one_small_term():
+    """The C printer and the bit-preserving rewrites (hoist, reuse) on a two-value term: what
+    the two tests above check on the whole arm (its derivation takes half a minute: slow tier)."""
+    sp = pytest.importorskip("sympy")
+    from sympy.printing.c import ccode
+
+    from impedance_cosim.physics import bind_source, derivation
+
+    q1, a1, m1 = sp.symbols("q1 a1 m1")
+    expr = sp.Matrix([[a1 * m1 * sp.cos(q1) + a1 * m1], [a1 * m1 * sp.sin(q1)]])
+    decl, body = derivation.c_function(ccode, "demo", ["q"], expr, "a demo")
+    assert decl[1] == "void arm_demo(const ArmParams *p, const double q[3], double *out);"
+    assert "    const double a1 = p->a1;" in body and "    (void)qd;" not in body
+    assert any(line.startswith("    out[1] = ") for line in body)
+    hoister = bind_source._Hoister({"a1", "m1"}, [])
+    temps = [("x0", "a1 * m1"), ("x1", "x0 * cos(q1)")]
+    results = ["x1 + x0", "sin(q1) * (m1 * a1)"]
+    temps, results = bind_source.reuse(*bind_source.hoist(temps, results, hoister))
+    # parameter-only parts bound once (a1 * m1 and m1 * a1 apart: not the same rounding order
+    # in general), the copy x0 dropped; the values unchanged, bit for bit
+    assert hoister.bound == [("k0", "a1 * m1"), ("k1", "m1 * a1")]
+    assert temps == [("x1", "k0 * cos(q1)")] and results == ["x1 + k0", "sin(q1) * k1"]
+    scope = {"a1": 0.1 + 0.2, "m1": 1 / 3, "q1": 0.7, "cos": math.cos, "sin": math.sin}
+    for name, source in hoister.bound + temps:
+        scope[name] = eval(source, scope)
+    printed = ["a1 * m1 * cos(q1) + a1 * m1", "sin(q1) * (m1 * a1)"]
+    assert [eval(r, scope) for r in results] == [eval(e, scope) for e in printed]

@@ -295,3 +295,22 @@ def test_a_parameter_the_system_lacks_is_an_error_before_any_run(monkeypatch, na
     monkeypatch.setitem(stability.SENSORS, "ideal", {"plant.no_such_thing": 1.0})
     with pytest.raises(MasterError, match="unknown parameter plant.no_such_thing"):
         stability.run_study([case], native_ssp)
+
+
+def test_boundaries_figure_and_report_page_from_the_committed_table(tmp_path):
+    """The study's figure and page from docs/boundaries.csv, without running the study (the
+    study's own tests are slow): a PNG, and a page that names the part and shows its table."""
+    from impedance_cosim.apps.stability.figures import boundaries_figure
+    from impedance_cosim.apps.stability.report import stability_report
+
+    rows = read_csv(Path(__file__).parents[1] / "docs" / "boundaries.csv")
+    boundaries_figure(rows, tmp_path / "boundaries.png")
+    assert (tmp_path / "boundaries.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (tmp_path / "boundaries.csv").write_bytes(
+        (Path(__file__).parents[1] / "docs" / "boundaries.csv").read_bytes()
+    )
+    part = {"status": "finished", "table": "boundaries.csv", "figures": ["boundaries.png"]}
+    data = {"this_command": ["boundaries"], "parts": {"boundaries": part}}
+    page = stability_report(tmp_path, data, None, "")
+    assert "All parts finished: boundaries." in page
+    assert "boundaries.png" in page and "gauss-seidel" in page  # the figure and the table

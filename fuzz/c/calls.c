@@ -198,6 +198,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 }
 
 #ifndef FUZZ_LIBFUZZER
+#include "replay.h"
 int main(int argc, char **argv)
 {
     if (argc == 3 && strcmp(argv[1], "--seed") == 0) { /* a run: set up, step, state, free */
@@ -210,21 +211,6 @@ int main(int argc, char **argv)
         out = fopen(path, "wb");
         return !out || fwrite(run, 1, sizeof run, out) != sizeof run || fclose(out) != 0;
     }
-    for (int k = 1; k < argc; k++) {
-        FILE *in = fopen(argv[k], "rb");
-        uint8_t *buf = NULL;
-        long n;
-        if (!in || fseek(in, 0, SEEK_END) != 0 || (n = ftell(in)) < 0 ||
-            fseek(in, 0, SEEK_SET) != 0 || !(buf = malloc((size_t)n + 1)) ||
-            fread(buf, 1, (size_t)n, in) != (size_t)n) {
-            fprintf(stderr, "cannot read %s\n", argv[k]);
-            return 2;
-        }
-        fclose(in);
-        LLVMFuzzerTestOneInput(buf, (size_t)n);
-        free(buf);
-    }
-    printf("replayed %d files\n", argc - 1);
-    return 0;
+    return replay_files(argc, argv);
 }
 #endif

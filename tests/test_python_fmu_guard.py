@@ -23,7 +23,7 @@ OK, ERROR = 0, 3
 
 # The child: only fmpy (importing impedance_cosim here would make the FMU use this checkout's
 # modules). Instantiate, step, free; then every use of the freed instance; leave without the
-# library destructors (pythonfmu's corrupts the heap at exit: not what this tests).
+# library destructors (the exit is what test_a_python_fmu_host_exits_with_an_intact_heap tests).
 CHILD = r"""
 import ctypes, os, sys
 from fmpy import extract, read_model_description
@@ -113,6 +113,65 @@ def test_the_guard_forwards_every_function_of_pythonfmus_binary(python_fmus, ver
     assert guard_source("PumaPlant", version).count(f"FMI{version}_Export") == (
         34 if version == 2 else 75
     )
+
+
+# The child for the exit: one instance, one step, free, and a normal exit (the libraries'
+# exit handlers and destructors run).
+EXIT_CHILD = r"""
+import sys
+from fmpy import extract, read_model_description
+path, version = sys.argv[1], sys.argv[2]
+md = read_model_description(path)
+if version == "2":
+    from fmpy.fmi2 import FMU2Slave as Slave
+else:
+    from fmpy.fmi3 import FMU3Slave as Slave
+s = Slave(guid=md.guid, unzipDirectory=extract(path),
+          modelIdentifier=md.coSimulation.modelIdentifier, instanceName="g")
+s.instantiate()
+if version == "2":
+    s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode()
+else:
+    s.enterInitializationMode(startTime=0.0)
+s.exitInitializationMode()
+s.doStep(0.0, 0.0025)
+s.terminate()
+s.freeInstance()
+print("freed", flush=True)
+"""
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind not installed")
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.slow
+def test_a_python_fmu_host_exits_with_an_intact_heap(python_fmus, version):
+    """pythonfmu's library empties its static PyState pointer after the C++ exit handler has
+    destroyed it: a write into a freed block at every host exit, which aborted 4 of 25 runs of
+    docs/running.md's API snippet ("corrupted double-linked list"). With the guard's exit
+    handler, valgrind sees no access to freed memory from pythonfmu's library at exit."""
+    cmd = ["valgrind", "--num-callers=8", sys.executable, "-c", EXIT_CHILD,
+           str(python_fmus[version] / PLANT), str(version)]  # fmt: skip
+    env = {**os.environ, "PYTHONMALLOC": "malloc"}
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0 and "freed" in done.stdout, done.stderr[-2000:]
+    bad = [b for b in _valgrind_errors(done.stderr) if REAL in b]
+    assert not bad, "\n\n".join(bad)
+
+
+def _valgrind_errors(log: str) -> list[str]:
+    """valgrind's error reports, one string each (its lines without the ==pid== prefix)."""
+    blocks, current = [], []
+    for line in log.splitlines():
+        if not line.startswith("=="):
+            continue
+        text = line.split("== ", 1)[-1]
+        if text.strip():
+            current.append(text)
+        elif current:
+            blocks.append("\n".join(current))
+            current = []
+    return [b for b in [*blocks, "\n".join(current)] if b.startswith("Invalid")]
 
 
 # --- the guard's loader on each platform, with a stand-in for pythonfmu's library --------------

@@ -53,6 +53,19 @@ static size_t n_live, cap_live;
 static void lock(void) { while (__atomic_exchange_n(&lock_word, 1, __ATOMIC_ACQUIRE)) {} }
 static void unlock(void) { __atomic_store_n(&lock_word, 0, __ATOMIC_RELEASE); }
 
+#ifndef _WIN32
+/* pythonfmu's library destroys its static PyState pointer in a C++ exit handler, then assigns
+   to the destroyed pointer from its destructor function (finalizePythonInterpreter): a write
+   into a freed heap block at every exit or unload, which corrupted the host's heap ("corrupted
+   double-linked list"). Registered after that library is loaded, this handler runs before its
+   exit handler and empties the pointer while it is alive. (On Windows DllMain empties it
+   first.) */
+static void release_python_state(void) {
+    void (*release)(void) = (void (*)(void))dlsym(real_lib, "finalizePythonInterpreter");
+    if (release) release();
+}
+#endif
+
 /* the original library, beside this one: <id>.pythonfmu<suffix> (under the lock) */
 static void *load(void) {
     if (real_lib) return real_lib;
@@ -82,6 +95,7 @@ static void *load(void) {
     if (!end || strchr(end, '/')) return NULL;
     strcpy(end, tail);
     real_lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (real_lib) atexit(release_python_state);
 #endif
     if (!real_lib) fprintf(stderr, "%(id)s: cannot load pythonfmu's library beside the guard\n");
     return real_lib;

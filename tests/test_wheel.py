@@ -11,6 +11,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tarfile
 import zipfile
 from pathlib import Path
 
@@ -64,8 +65,17 @@ def test_the_installed_wheel_runs_without_a_compiler(tmp_path: Path) -> None:
     _run([sys.executable, "-m", "impedance_cosim.cli", "build", "--out", fmus])
     src = _sources(tmp_path / "src")
     env = {**os.environ, "IMPCOSIM_WHEEL_FMUS": str(fmus)}
-    _run([sys.executable, "-m", "build", "--wheel", "--outdir", tmp_path / "dist", src], env=env)
+    # plain `python -m build`: the sdist (which carries fmus/), then the wheel built from it
+    _run([sys.executable, "-m", "build", "--outdir", tmp_path / "dist", src], env=env)
     (wheel,) = (tmp_path / "dist").glob("impedance_cosim-*-py3-none-any.whl")
+    (sdist,) = (tmp_path / "dist").glob("impedance_cosim-*.tar.gz")
+    with tarfile.open(sdist) as t:
+        in_sdist = {
+            n.split("/fmus/", 1)[1]
+            for n in t.getnames()
+            if "/fmus/" in n and t.getmember(n).isfile()
+        }
+    assert all(any(n == r or n.startswith(r + "/") for n in in_sdist) for r in REQUIRED)
     with zipfile.ZipFile(wheel) as z:
         packaged = {n[len(DATA) :]: z.read(n) for n in z.namelist() if n.startswith(DATA)}
     assert all(any(n == r or n.startswith(r + "/") for n in packaged) for r in REQUIRED)

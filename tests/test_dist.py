@@ -51,8 +51,13 @@ def two_builds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    building, bundling, wrote, measured = done.stdout.strip().splitlines()
+    building, *progress, bundling, wrote, measured = done.stdout.strip().splitlines()
     assert building == f"building every FMU and archive into {b / 'fmus'} ..."
+    # one line per file as it is built: seconds since the start, its name
+    built = [re.fullmatch(r" +[\d.]+ s  built (\S+)", line) for line in progress]
+    assert all(built), progress
+    names = {m.group(1) for m in built}
+    assert {"PumaPlant.fmu", "native/PumaPlant.fmu", "PaperScenario.ssp"} <= names, names
     assert bundling.startswith("bundling ") and bundling.endswith(f" files into {b / 'dist'} ...")
     assert wrote == f"wrote {b / 'dist' / (NAME + '.zip')}"
     # its size and the build's time as measured (printed, not asserted: they vary)

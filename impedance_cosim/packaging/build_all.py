@@ -9,6 +9,7 @@ import os
 import shutil
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 from impedance_cosim.packaging import toolchains
@@ -26,11 +27,16 @@ STAGE_PREFIX = ".impcosim-build-"  # the folder inside out_dir that a build writ
 CLOSED_LOOP = "closedloop"  # --only key: the closed-loop FMUs (packaging/closedloop.py)
 
 
-def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> list[Path]:
+def build_all(
+    out_dir: Path = DEFAULT_OUT,
+    only: list[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> list[Path]:
     """Build the named FMUs (default: all, then the system archives) and return their paths.
     Everything is built into a temporary folder inside out_dir and moved into place (one
     atomic rename per file) only when all of it built: a failed or interrupted build leaves
-    out_dir as it was, and concurrent builds into one folder each finish whole."""
+    out_dir as it was, and concurrent builds into one folder each finish whole. progress, if
+    given, is called with each file's name (relative to out_dir) as soon as it is built."""
     keys = only or list(FMUS)
     unknown = [k for k in keys if k not in FMUS and k != CLOSED_LOOP]
     if unknown:
@@ -40,7 +46,7 @@ def build_all(out_dir: Path = DEFAULT_OUT, only: list[str] | None = None) -> lis
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=out_dir))
     try:
-        built = _build_into(stage, keys, not only)
+        built = _build_into(stage, keys, not only, progress or (lambda name: None))
         return [_move_into_place(path, stage, out_dir) for path in built]
     except ArchiveWriteError as exc:  # name the file's final place, not the staging folder's
         shutil.rmtree(stage, ignore_errors=True)
@@ -72,9 +78,20 @@ def _move_into_place(path: Path, stage: Path, out_dir: Path) -> Path:
     return target
 
 
-def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
+def _build_into(
+    out_dir: Path, keys: list[str], everything: bool, progress: Callable[[str], None]
+) -> list[Path]:
     """The build itself, into out_dir (build_all's temporary folder)."""
-    built = [build_fmu(FMUS[k], out_dir) for k in keys if k in FMUS]
+    built: list[Path] = []
+
+    def add(*paths: Path) -> None:
+        for path in paths:
+            built.append(path)
+            progress(Path(path).relative_to(out_dir).as_posix())
+
+    for k in keys:
+        if k in FMUS:
+            add(build_fmu(FMUS[k], out_dir))
     native = [k for k in keys if k in FMUS and (NATIVE / k / "model.c").is_file()]
     closed_loop = CLOSED_LOOP in keys
     problem = toolchains.BY_PLATFORM["linux64"].problem() if native or closed_loop else None
@@ -88,7 +105,8 @@ def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
         if closed_loop and not everything:
             raise toolchains.CompileError(f"{problem}: the closed-loop FMUs need a C compiler")
         native = []
-    built += [build_native_fmu(FMUS[k], Path(out_dir) / "native") for k in native]
+    for k in native:
+        add(build_native_fmu(FMUS[k], Path(out_dir) / "native"))
     if everything:
         from impedance_cosim.cosim.system import SCENARIOS
 
@@ -96,18 +114,18 @@ def _build_into(out_dir: Path, keys: list[str], everything: bool) -> list[Path]:
         if native:
             flavours.append(("PaperScenario-native", Path(out_dir) / "native"))
         for name, fmu_dir in flavours:
-            built.append(build_ssp(out_dir, name, fmu_dir))
+            add(build_ssp(out_dir, name, fmu_dir))
             for s in SCENARIOS:  # one archive per scenario, for engines without SSP variants
-                built.append(build_ssp(out_dir, f"{name}-{s}", fmu_dir, scenario=s))
+                add(build_ssp(out_dir, f"{name}-{s}", fmu_dir, scenario=s))
         if native:
             from impedance_cosim.packaging.build3 import build_fmi3  # the FMI 3.0 edition
 
-            built += build_fmi3(out_dir)
+            add(*build_fmi3(out_dir))
         from impedance_cosim.packaging.robot_files import write_robot_files  # URDF and MJCF
 
-        built += write_robot_files(Path(out_dir) / "robot")
+        add(*write_robot_files(Path(out_dir) / "robot"))
     if (everything and native) or (closed_loop and not everything):
         from impedance_cosim.packaging.closedloop import build_closed_loops  # one-FMU loops
 
-        built += build_closed_loops(out_dir)
+        add(*build_closed_loops(out_dir))
     return built

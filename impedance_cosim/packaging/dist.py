@@ -39,8 +39,13 @@ def build_dist(dist_dir: Path, out_dir: Path = DEFAULT_OUT) -> Path:
     dist_dir/impedance-cosim-<version>.zip; return the bundle's path."""
     Path(dist_dir).mkdir(parents=True, exist_ok=True)  # fail before building, not after
     print(f"building every FMU and archive into {out_dir} ...", flush=True)
+    started = time.perf_counter()
+
+    def progress(name: str) -> None:
+        print(f"  {time.perf_counter() - started:5.1f} s  built {name}", flush=True)
+
     try:
-        built = build_all(Path(out_dir))
+        built = build_all(Path(out_dir), progress=progress)
     except RuntimeError as exc:  # a failed compile: one message, no traceback
         raise ValueError(str(exc)) from None
     print(f"bundling {len(built)} files into {dist_dir} ...", flush=True)

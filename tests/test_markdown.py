@@ -363,3 +363,24 @@ def test_examples_do_not_write_over_the_quick_start_or_each_other() -> None:
     assert "results" not in by_folder, by_folder.get("results")
     shared = {out: cmds for out, cmds in by_folder.items() if len(cmds) > 1}
     assert not shared, shared
+
+
+# Words that tell the project's work history rather than what the software does; user pages
+# (all but docs/development.md, the developers' page with its before/after table) avoid them.
+HISTORY = re.compile(
+    r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b"  # a commit hash
+    r"|\bissue #?\d+|\buntil now\b|\bbefore (?:these|this|the) changes?\b|\bused to be\b",
+    re.IGNORECASE,
+)
+USER_PAGES = [p for p in PAGES if p.name != "development.md"]
+
+
+@pytest.mark.parametrize("page", USER_PAGES, ids=[str(p.relative_to(REPO)) for p in USER_PAGES])
+def test_user_pages_speak_of_the_software_not_its_history(page: Path) -> None:
+    """No commit hashes, issue numbers or before/after wording in a user page."""
+    found = [
+        f"{page.name}:{n}: {m.group(0)!r}"
+        for n, line in enumerate(page.read_text().splitlines(), 1)
+        for m in HISTORY.finditer(line)
+    ]
+    assert not found, found

@@ -57,8 +57,8 @@ def test_fmi3_fmu_is_valid_with_platforms_sources_and_documentation(fmi3_dir, na
     assert not any(n.startswith(("binaries/linux64", "binaries/win64")) for n in names)
     assert {"documentation/index.html", "documentation/licenses/license.txt"} <= names
     compiled = [f.get("name") for f in build.iter("SourceFile")]
-    assert "fmi3_glue.c" in compiled and "fmi2_glue.c" not in compiled  # included, not compiled
-    assert {"sources/fmi2_glue.c", "sources/fmi3Functions.h"} <= names
+    assert "fmi3_glue.c" in compiled and "instance.c" not in compiled  # included, not compiled
+    assert {"sources/instance.c", "sources/fmi3Functions.h"} <= names
     with zipfile.ZipFile(path) as z:
         page = z.read("documentation/index.html").decode()
     assert "instantiationToken" in page and "causality independent" in page

@@ -113,7 +113,7 @@ def test_native_plant_declares_model_exchange(native_dir, fmu_dir):
     assert all(set(u.dependencies) <= state_vars for u in md.outputs)
     assert any(set(u.dependencies) == state_vars for u in md.outputs)
     with zipfile.ZipFile(path) as z:
-        assert "sources/fmi2_me.c" in z.namelist()
+        assert "sources/instance_me.c" in z.namelist()
     # the Python FMUs (pythonfmu: co-simulation only) do not claim ME
     for other in (fmu_dir / name for name in (PLANT, CONTROLLER, "BridgePlant.fmu")):
         with zipfile.ZipFile(other) as z:

@@ -37,7 +37,7 @@ def test_native_fmu_is_valid_with_sources(native_dir, fmu_dir, name):
     with zipfile.ZipFile(path) as z:
         names = z.namelist()
     assert f"binaries/linux64/{name[:-4]}.so" in names
-    assert "sources/buildDescription.xml" in names and "sources/fmi2_glue.c" in names
+    assert "sources/buildDescription.xml" in names and "sources/instance.c" in names
     native, python = (read_model_description(str(p)) for p in (path, fmu_dir / name))
     assert [
         (v.name, v.valueReference, v.causality, v.variability, v.type, v.unit, v.start)

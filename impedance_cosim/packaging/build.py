@@ -186,9 +186,9 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
 
 NATIVE = REPO / "native"
-NATIVE_SHARED = ("fmi2_glue.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
+NATIVE_SHARED = ("instance.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
                  "ode.c", "ode.h", "pyrandom.c", "pyrandom.h",
-                 "fmi2_me.c", "instance.h", "model_me.h",
+                 "instance_me.c", "instance.h", "model_me.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",
                  "model_partials.h")  # fmt: skip
 NATIVE_MODEL = ("config.h", "model.h", "model.c")

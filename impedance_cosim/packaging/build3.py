@@ -49,7 +49,7 @@ FMI3_GLUE = (
     "fmi2_hidden.h",
 )
 # compiled into the FMI 3 binary by inclusion from fmi3_glue.c, not on their own
-INCLUDED = ("fmi2_glue.c", "fmi2_me.c")
+INCLUDED = ("instance.c", "instance_me.c")
 SAMPLE_CLOCK = SampleClock(
     "sample_clock",
     "sample_period",

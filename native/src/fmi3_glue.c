@@ -23,8 +23,8 @@
 #include "fmi2_hidden.h" /* before the FMI 2 layer: its functions become internal */
 
 #define model_step model_step_fmi3 /* fmi2DoStep steps through model_step_fmi3 (below) */
-#include "fmi2_glue.c"
-#include "fmi2_me.c"
+#include "instance.c"
+#include "instance_me.c"
 #undef model_step
 int model_step(Data *d, double t, double h, char *msg);
 

@@ -6,6 +6,7 @@ Model Exchange), and the clocked controller under Scheduled Execution."""
 from __future__ import annotations
 
 import ctypes
+import re
 import shutil
 import subprocess
 import sys
@@ -57,8 +58,10 @@ def test_fmi3_fmu_is_valid_with_platforms_sources_and_documentation(fmi3_dir, na
     assert not any(n.startswith(("binaries/linux64", "binaries/win64")) for n in names)
     assert {"documentation/index.html", "documentation/licenses/license.txt"} <= names
     compiled = [f.get("name") for f in build.iter("SourceFile")]
-    assert "fmi3_glue.c" in compiled and "instance.c" not in compiled  # included, not compiled
+    # the FMI 3.0 glue and the instance core, each its own translation unit; no FMI 2.0 glue
+    assert {"fmi3_glue.c", "instance.c", "instance_me.c"} <= set(compiled)
     assert {"sources/instance.c", "sources/fmi3Functions.h"} <= names
+    assert not {"sources/fmi2_glue.c", "sources/fmi2_me.c"} & names
     with zipfile.ZipFile(path) as z:
         page = z.read("documentation/index.html").decode()
     assert "instantiationToken" in page and "causality independent" in page
@@ -391,3 +394,13 @@ def test_our_master_honours_the_clock(
     ticks.clear()
     coarse = Master(system, "observer", step_size=1 / 200, stop_time=1.0, fmu_files=files).run()
     assert coarse.ok and ticks[-1] == 400 and len(ticks) == 200
+
+
+def test_the_glue_includes_no_c_file_and_renames_no_function():
+    """native/src: each .c file is a translation unit of its own (no `#include "x.c"`), and no
+    header renames FMI functions with macros (the FMI 3.0 glue calls the instance core)."""
+    src = Path(__file__).resolve().parents[1] / "native" / "src"
+    for path in sorted(src.glob("*.[ch]")):
+        text = path.read_text()
+        assert not re.search(r'#include\s+"[^"]+\.c"', text), path.name
+        assert not re.search(r"#define\s+fmi[23]\w+\s+\w", text), path.name

@@ -309,7 +309,7 @@ class Fuzzer:
     def mutate(self, blob: bytes) -> bytes:
         """A serialized state, often mutated: flipped bytes, random 32-bit or 64-bit words
         (counters, enums, doubles), truncated or extended; in most mutated bodies the checksum
-        is recomputed (fmi2_glue.c's SerialHeader: CRC-32 at byte 60 of a 64-byte header), so
+        is recomputed (instance.c's SerialHeader: CRC-32 at byte 60 of a 64-byte header), so
         that the checks behind it get random bodies too."""
         r = self.rng
         b = bytearray(blob)

@@ -1,4 +1,4 @@
-"""FMI 2.0 Model Exchange of the native FMUs (native/src/fmi2_me.c). The plant: the
+"""FMI 2.0 Model Exchange of the native FMUs (native/src/fmi2_me.c, instance_me.c). The plant: the
 modelDescription, agreement with the co-simulation interface (default experiment and the paper
 scenario's torques replayed open loop under fmpy's CVode), the contact event indicator, and the ME
 rules (ideal sensors, call order). The controller: time events at its sample instants, the same

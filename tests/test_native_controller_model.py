@@ -1,7 +1,7 @@
 """The native controller model (native/controller/model.c) against the Python ControllerModel.
 
 model.c is compiled with the FMU's flags into a test library, with a small shim (fail(), Data
-setup and accessors) standing in for native/src/fmi2_glue.c, and driven through ctypes with the
+setup and accessors) standing in for native/src/instance.c, and driven through ctypes with the
 same parameters and inputs as controller_model.model.ControllerModel: the outputs must be equal
 bit for bit after initialization and after every step, and the errors must carry the same
 messages."""

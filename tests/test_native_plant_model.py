@@ -29,7 +29,7 @@ SOURCES = ["native/plant/model.c", "native/src/ode.c", "native/src/pyrandom.c",
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror"]
 MSG_MAX = 512
 
-# The test shim: fail() (the real one is in fmi2_glue.c), and access to Data for ctypes.
+# The test shim: fail() (the real one is in instance.c), and access to Data for ctypes.
 SHIM = r"""
 #include <stdarg.h>
 #include <stdio.h>

@@ -35,7 +35,7 @@ from impedance_cosim.packaging.toolchains import BY_PLATFORM
 DT = 1 / 400
 PLANT, CONTROLLER = "PumaPlant.fmu", "ImpedanceController.fmu"
 OK, ERROR = 0, 3  # the same numbers in FMI 2 and FMI 3
-# the serialized state (fmi2_glue.c, SerialHeader): magic[8], n_vars, body_size, guid[40], flags,
+# the serialized state (instance.c, SerialHeader): magic[8], n_vars, body_size, guid[40], flags,
 # crc (CRC-32 over the 60 bytes before it and the body), then the body (instance.h's Snapshot)
 HEADER = 64
 MAGIC = b"IMPCNAT2"

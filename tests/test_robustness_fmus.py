@@ -107,7 +107,7 @@ class Slave:
         return self.f["fmi2DeSerializeFMUstate"](self.c, buf, len(blob), ctypes.byref(state)), state
 
 
-# Native FMU state layout (fmi2_glue.c, instance.h): SerialHeader (64 bytes, its CRC-32 at 60),
+# Native FMU state layout (instance.c, instance.h): SerialHeader (64 bytes, its CRC-32 at 60),
 # then Snapshot = Data (r[N], i[N], s[N][64], ModelState, start_time), phase, dirty, last_time,
 # me_time, me_time_set, event_switches. Offsets from the body's end (checked on a valid state
 # below). The crafted bodies get their checksum recomputed, so that the field checks are tested.

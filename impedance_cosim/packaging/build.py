@@ -186,21 +186,25 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 
 
 NATIVE = REPO / "native"
+# every native FMU's sources, whatever its FMI version: the model API (glue.h, model_me.h,
+# model_partials.h), the instance core, the arm, the integrator
 NATIVE_SHARED = ("instance.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
                  "ode.c", "ode.h", "pyrandom.c", "pyrandom.h",
                  "instance_me.c", "instance.h", "model_me.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",
                  "model_partials.h")  # fmt: skip
+FMI2_GLUE = ("fmi2_glue.c", "fmi2_me.c")  # the exported fmi2* functions
 NATIVE_MODEL = ("config.h", "model.h", "model.c")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 
-def _native_sources(spec: FmuSpec) -> dict[str, bytes]:
-    """The C sources of a native FMU (flat: name -> content), FMI headers from fmpy included."""
+def _native_sources(spec: FmuSpec, glue: tuple[str, ...] = FMI2_GLUE) -> dict[str, bytes]:
+    """The C sources of a native FMU (flat: name -> content) with the glue of one FMI version
+    (FMI2_GLUE, or build3's FMI3_GLUE), FMI 2.0 headers from fmpy included."""
     import fmpy
 
     files = {}
-    for name in NATIVE_SHARED:
+    for name in (*NATIVE_SHARED, *glue):
         path = NATIVE / "src" / name
         if name.startswith(("ode", "pyrandom")) and spec.key != "plant":
             continue

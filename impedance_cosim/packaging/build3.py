@@ -1,8 +1,8 @@
 """Build the FMI 3.0 edition of the native FMUs into fmus/fmi3/, and its system archive.
 
 The same model code (native/<model>/model.c, config.h) and the same variable tables as the FMI 2.0
-native FMUs; the glue is native/src/fmi3_glue.c, which includes the FMI 2 layer (fmi2_glue.c,
-fmi2_me.c) under internal names. The FMUs:
+native FMUs, and the same instance core (native/src/instance.c, instance_me.c); the glue is
+native/src/fmi3_*.c (FMI3_GLUE) instead of the FMI 2.0 glue. The FMUs:
 - PumaPlant.fmu: Co-Simulation and Model Exchange;
 - ImpedanceController.fmu: Co-Simulation (and Model Exchange), no clock: for any FMI 3 host;
 - ImpedanceControllerClocked.fmu: Scheduled Execution, its sampling as a periodic input clock
@@ -25,7 +25,6 @@ from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMUS,
-    NATIVE,
     FmuSpec,
     _add_documentation,
     _build_description,
@@ -46,10 +45,7 @@ FMI3_GLUE = (
     "fmi3_cosim.c",  # fmi3DoStep: early return, intermediate update, event mode in CS
     "fmi3_stubs.c",
     "fmi3_wrapper.h",
-    "fmi2_hidden.h",
 )
-# compiled into the FMI 3 binary by inclusion from fmi3_glue.c, not on their own
-INCLUDED = ("instance.c", "instance_me.c")
 SAMPLE_CLOCK = SampleClock(
     "sample_clock",
     "sample_period",
@@ -86,15 +82,13 @@ def build_native_fmu3(
     cls = spec.load_model_class()
     me = getattr(cls, "MODEL_EXCHANGE", None)
     early = spec.key in EARLY_RETURN and clock is None
-    sources = _native_sources(spec)
+    sources = _native_sources(spec, FMI3_GLUE)
     headers = Path(fmpy.__file__).parent / "c-code"
     for name in FMI3_HEADERS:
         sources[name] = (headers / name).read_bytes()
-    for name in FMI3_GLUE:
-        sources[name] = (NATIVE / "src" / name).read_bytes()
     n_table = len(full_table(cls.variables(), me))
     sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables(), early).encode()
-    c_files = sorted(n for n in sources if n.endswith(".c") and n not in INCLUDED)
+    c_files = sorted(n for n in sources if n.endswith(".c"))
     digest = hashlib.sha256(_xml(cls, "", clock, early))
     for name in sorted(sources):
         digest.update(name.encode() + sources[name])

@@ -24,6 +24,7 @@ from impedance_cosim.fmi.variables import ModelExchange, Variable
 from impedance_cosim.fmi.variables3 import c_config3, model_description3
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
+    FMI2_GLUE,
     FMI_HEADERS,
     NATIVE,
     NATIVE_SHARED,
@@ -115,11 +116,12 @@ def c_config_closed_loop(scenario: str) -> str:
     return text.removesuffix("#endif\n") + "\n".join(extra)
 
 
-def _sources(scenario: str) -> dict[str, bytes]:
-    """The C sources (flat): the shared glue, each part's model under <part>_*, the closed loop."""
+def _sources(scenario: str, glue: tuple[str, ...] = FMI2_GLUE) -> dict[str, bytes]:
+    """The C sources (flat): the shared code with one FMI version's glue, each part's model
+    under <part>_*, the closed loop."""
     import fmpy
 
-    files = {name: (NATIVE / "src" / name).read_bytes() for name in NATIVE_SHARED}
+    files = {name: (NATIVE / "src" / name).read_bytes() for name in (*NATIVE_SHARED, *glue)}
     for part in PARTS:
         for name in ("config.h", "model.h", "model.c"):
             files[f"{part}_{name}"] = (NATIVE / part / name).read_bytes()
@@ -205,17 +207,14 @@ def build_closed_loop3(scenario: str, out_dir: Path = DEFAULT_OUT / "fmi3") -> P
     import fmpy
 
     from impedance_cosim.packaging.build3 import FMI3_GLUE, FMI3_HEADERS
-    from impedance_cosim.packaging.build3 import INCLUDED as FMI3_INCLUDED
 
-    sources = _sources(scenario)
+    sources = _sources(scenario, FMI3_GLUE)
     headers = Path(fmpy.__file__).parent / "c-code"
     for name in FMI3_HEADERS:
         sources[name] = (headers / name).read_bytes()
-    for name in FMI3_GLUE:
-        sources[name] = (NATIVE / "src" / name).read_bytes()
     n_table = len(table(scenario))
     sources["fmi3_config.h"] = c_config3(n_table, NO_STATES, None, variables(scenario)).encode()
-    c_files = _c_files(sources, INCLUDED + FMI3_INCLUDED)
+    c_files = _c_files(sources, INCLUDED)
     token = _token(xml3(scenario, ""), sources)
     sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
     sources["buildDescription.xml"] = _build_description(model_identifier(scenario), c_files,

@@ -129,8 +129,9 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     memcpy(backup_r, w->inner->s.d.r, sizeof backup_r);
     for (;;) {
         w->reached = t_end;
-        s = fmi2DoStep(w->inner, t, t_end - t,
-                       noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
+        s = instance_do_step(w->inner, t, t_end - t,
+                             noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False,
+                             model_step_fmi3);
         if (s != fmi2OK && t > currentCommunicationPoint) {
             w->inner->s.d.m = backup_m;
             memcpy(w->inner->s.d.r, backup_r, sizeof backup_r);

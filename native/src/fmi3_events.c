@@ -1,5 +1,5 @@
 /* The FMI 3.0 Model Exchange functions and the sample clock of Scheduled Execution (see
- * fmi3_glue.c): calls of the FMI 2.0 Model Exchange layer (fmi2_me.c). A clock tick is an event of
+ * fmi3_glue.c): calls of the instance core's Model Exchange side (instance_me.c). A clock tick is an event of
  * the model's Model Exchange side at the tick's time: the samples due are taken. */
 #include <math.h>
 #include <stddef.h>
@@ -141,12 +141,12 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
                        "before the previous one (%.17g)", activationTime, w->inner->s.last_time);
     }
     /* a tick is an event of the Model Exchange side at that time: the samples due are taken */
-    s = fmi2EnterEventMode(w->inner);
+    s = instance_enter_event_mode(w->inner);
     if (s == fmi2OK) {
-        s = fmi2SetTime(w->inner, activationTime);
+        s = instance_set_time(w->inner, activationTime);
     }
     if (s == fmi2OK) {
-        s = fmi2NewDiscreteStates(w->inner, &ev);
+        s = instance_new_discrete_states(w->inner, &ev);
     }
     return status3(s);
 }
@@ -171,7 +171,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
         return FAIL(w, "fmi3UpdateDiscreteStates: this FMU has event mode under Model "
                        "Exchange only");
     }
-    s = fmi2NewDiscreteStates(w->inner, &ev);
+    s = instance_new_discrete_states(w->inner, &ev);
     if (s != fmi2OK) {
         return status3(s);
     }
@@ -200,7 +200,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
 {
     WRAP("fmi3EnterContinuousTimeMode");
-    return status3(fmi2EnterContinuousTimeMode(w->inner));
+    return status3(instance_enter_continuous_time_mode(w->inner));
 }
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
@@ -214,7 +214,7 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
     if (!enterEventMode || !terminateSimulation) {
         return FAIL(w, "fmi3CompletedIntegratorStep: NULL output argument");
     }
-    s = fmi2CompletedIntegratorStep(w->inner, noSetFMUStatePriorToCurrentPoint, &enter, &stop);
+    s = instance_completed_integrator_step(w->inner, noSetFMUStatePriorToCurrentPoint, &enter, &stop);
     *enterEventMode = enter != fmi2False;
     *terminateSimulation = stop != fmi2False;
     return status3(s);
@@ -223,42 +223,42 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
 {
     WRAP("fmi3SetTime");
-    return status3(fmi2SetTime(w->inner, time));
+    return status3(instance_set_time(w->inner, time));
 }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
                                    size_t nContinuousStates)
 {
     WRAP("fmi3SetContinuousStates");
-    return status3(fmi2SetContinuousStates(w->inner, continuousStates, nContinuousStates));
+    return status3(instance_set_continuous_states(w->inner, continuousStates, nContinuousStates));
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
                                              size_t nContinuousStates)
 {
     WRAP("fmi3GetContinuousStateDerivatives");
-    return status3(fmi2GetDerivatives(w->inner, derivatives, nContinuousStates));
+    return status3(instance_get_derivatives(w->inner, derivatives, nContinuousStates));
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
                                   size_t nEventIndicators)
 {
     WRAP("fmi3GetEventIndicators");
-    return status3(fmi2GetEventIndicators(w->inner, eventIndicators, nEventIndicators));
+    return status3(instance_get_event_indicators(w->inner, eventIndicators, nEventIndicators));
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
                                    size_t nContinuousStates)
 {
     WRAP("fmi3GetContinuousStates");
-    return status3(fmi2GetContinuousStates(w->inner, continuousStates, nContinuousStates));
+    return status3(instance_get_continuous_states(w->inner, continuousStates, nContinuousStates));
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates)
 {
     WRAP("fmi3GetNominalsOfContinuousStates");
-    return status3(fmi2GetNominalsOfContinuousStates(w->inner, nominals, nContinuousStates));
+    return status3(instance_get_nominals(w->inner, nominals, nContinuousStates));
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)

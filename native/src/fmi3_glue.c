@@ -1,17 +1,15 @@
 /* The FMI 3.0 interface of every native model (Co-Simulation, Model Exchange and, for a model
- * with a sample clock, Scheduled Execution): a thin layer over the FMI 2.0 implementation.
- *
- * This file includes fmi2_glue.c and fmi2_me.c (one translation unit) with their functions
- * renamed to internal impc_fmi2* names (fmi2_hidden.h), and calls them (so do fmi3_events.c:
- * Model Exchange and the clock, and fmi3_stubs.c: what is not provided): one state machine, one set of checks (parameters, non-finite inputs, call order,
- * FMU-state validation) and one FMU-state format for both standards. What FMI 3 adds is here:
- * the `independent` time variable (value reference VR_TIME, read-only), the nValues argument,
- * fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra results,
- * and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an event of
- * the model's Model Exchange side at that time: the samples due are taken, outputs updated).
- * Co-Simulation (fmi3_cosim.c) samples inside doStep as under FMI 2.0, so a host without clock
- * support runs it unchanged; a model with discrete-state switches (the plant) offers early return,
- * the intermediate update and event mode at each switch.
+ * with a sample clock, Scheduled Execution), over the instance core (instance.c, instance_me.c)
+ * that the FMI 2.0 glue calls too (so do fmi3_events.c: Model Exchange and the clock, and
+ * fmi3_stubs.c: what is not provided): one set of checks (parameters, non-finite inputs, call
+ * order, FMU-state validation) and one FMU-state format for both standards. What FMI 3 adds is
+ * here: the `independent` time variable (value reference VR_TIME, read-only), the nValues
+ * argument, fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra
+ * results, and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an
+ * event of the model's Model Exchange side at that time: the samples due are taken, outputs
+ * updated). Co-Simulation (fmi3_cosim.c) samples inside doStep as under FMI 2.0, so a host
+ * without clock support runs it unchanged; a model with discrete-state switches (the plant)
+ * offers early return, the intermediate update and event mode at each switch.
  */
 #include <math.h>
 #include <stddef.h>
@@ -20,14 +18,8 @@
 #include <string.h>
 
 #include "fmi3Functions.h"
-#include "fmi2_hidden.h" /* before the FMI 2 layer: its functions become internal */
-
-#define model_step model_step_fmi3 /* fmi2DoStep steps through model_step_fmi3 (below) */
-#include "instance.c"
-#include "instance_me.c"
-#undef model_step
-int model_step(Data *d, double t, double h, char *msg);
-
+#include "glue.h"
+#include "instance.h"
 #include "fmi3_wrapper.h" /* Wrapper, WRAP, FAIL */
 #if HAS_EARLY_RETURN
 /* model.c: model_step that stops at the first discrete-state switch inside the step, its work
@@ -39,9 +31,10 @@ int model_step_early(Data *d, double t, double h, double *reached, StepWork *wor
 #error "the FMI 3 layer needs the model's Model Exchange side (config.h: MODEL_EXCHANGE)"
 #endif
 
-/* The model step fmi2DoStep takes: the model's own, or, where early return is on, one that stops
- * at an event. fmi2DoStep steps the instance's own Data (inst->s.d, never a copy: the early-return
- * test would fail otherwise), so d leads to the instance and its logger environment, the Wrapper. */
+/* The model step fmi3DoStep takes (through instance_do_step): the model's own, or, where early
+ * return is on, one that stops at an event. instance_do_step steps the instance's own Data
+ * (inst->s.d, never a copy: the early-return test would fail otherwise), so d leads to the
+ * instance and its logger environment, the Wrapper. */
 int model_step_fmi3(Data *d, double t, double h, char *msg)
 {
     const Instance *inst =
@@ -154,7 +147,7 @@ static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Bo
     cb.freeMemory = free;
     cb.stepFinished = NULL;
     cb.componentEnvironment = w;
-    w->inner = (Instance *)fmi2Instantiate(name, kind == K_CS ? fmi2CoSimulation : fmi2ModelExchange,
+    w->inner = (Instance *)instance_new(name, kind == K_CS ? fmi2CoSimulation : fmi2ModelExchange,
                                            token, NULL, &cb, visible ? fmi2True : fmi2False,
                                            logging_on ? fmi2True : fmi2False);
     if (!w->inner) {
@@ -172,7 +165,7 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
                                const fmi3String categories[])
 {
     WRAP("fmi3SetDebugLogging");
-    return status3(fmi2SetDebugLogging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
+    return status3(instance_set_logging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
                                   categories));
 }
 
@@ -263,7 +256,7 @@ void fmi3FreeInstance(fmi3Instance instance)
     if (!w || !allowed_in_update(w, "fmi3FreeInstance")) {
         return; /* refused inside the intermediate update: fmi3DoStep goes on with w */
     }
-    fmi2FreeInstance(w->inner);
+    instance_free(w->inner);
     *(volatile unsigned *)&w->magic = 0; /* volatile: the store must survive free() */
     free(w);
 }
@@ -277,19 +270,19 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     if (w->inner->s.phase != S_INSTANTIATED) {
         return FAIL(w, "fmi3EnterInitializationMode called twice or after initialization");
     }
-    s = fmi2SetupExperiment(w->inner, toleranceDefined ? fmi2True : fmi2False, tolerance,
+    s = instance_setup(w->inner, toleranceDefined ? fmi2True : fmi2False, tolerance,
                             startTime, stopTimeDefined ? fmi2True : fmi2False, stopTime);
     if (s != fmi2OK) {
         return status3(s);
     }
-    return status3(fmi2EnterInitializationMode(w->inner));
+    return status3(instance_enter_initialization(w->inner));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
     fmi3Status s;
     WRAP("fmi3ExitInitializationMode");
-    s = status3(fmi2ExitInitializationMode(w->inner));
+    s = status3(instance_exit_initialization(w->inner));
     if (s <= fmi3Warning && w->kind == K_CS && w->event_mode_used) {
         w->cs_event_mode = 1; /* co-simulation with eventModeUsed: into Event Mode */
     }
@@ -305,20 +298,20 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
     if (w->kind != K_ME) {
         return FAIL(w, "fmi3EnterEventMode: this FMU has event mode under Model Exchange only");
     }
-    return status3(fmi2EnterEventMode(w->inner));
+    return status3(instance_enter_event_mode(w->inner));
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
     WRAP("fmi3Terminate");
-    return status3(fmi2Terminate(w->inner));
+    return status3(instance_terminate(w->inner));
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     WRAP("fmi3Reset");
     w->cs_event_mode = 0;
-    return status3(fmi2Reset(w->inner));
+    return status3(instance_reset(w->inner));
 }
 /* --- getters and setters ---------------------------------------------------------------------- */
 
@@ -383,7 +376,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
         return fmi3Error;
     }
     if (!mentions_extra(valueReferences, nValueReferences)) {
-        return status3(fmi2GetReal(w->inner, (const fmi2ValueReference *)valueReferences,
+        return status3(instance_get_real(w->inner, (const fmi2ValueReference *)valueReferences,
                               nValueReferences, values));
     }
     for (size_t k = 0; k < nValueReferences; k++) {
@@ -391,7 +384,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
         if (valueReferences[k] >= N_VARS) {
             s = get_extra(w, valueReferences[k], &values[k]);
         } else {
-            s = status3(fmi2GetReal(w->inner, (const fmi2ValueReference *)&valueReferences[k], 1,
+            s = status3(instance_get_real(w->inner, (const fmi2ValueReference *)&valueReferences[k], 1,
                                &values[k]));
         }
         if (s != fmi3OK) {
@@ -418,7 +411,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                         (unsigned)valueReferences[k]);
         }
     }
-    return status3(fmi2SetReal(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(instance_set_real(w->inner, (const fmi2ValueReference *)valueReferences,
                           nValueReferences, values));
 }
 
@@ -429,7 +422,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt32")) {
         return fmi3Error;
     }
-    return status3(fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(instance_get_integer(w->inner, (const fmi2ValueReference *)valueReferences,
                              nValueReferences, (fmi2Integer *)values));
 }
 
@@ -440,7 +433,7 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt32")) {
         return fmi3Error;
     }
-    return status3(fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(instance_set_integer(w->inner, (const fmi2ValueReference *)valueReferences,
                              nValueReferences, (const fmi2Integer *)values));
 }
 
@@ -455,7 +448,7 @@ fmi3Status fmi3GetInt64(fmi3Instance instance, const fmi3ValueReference valueRef
     }
     for (size_t k = 0; k < nValueReferences; k += 64) {
         size_t n = nValueReferences - k < 64 ? nValueReferences - k : 64;
-        fmi2Status s = fmi2GetInteger(w->inner, (const fmi2ValueReference *)valueReferences + k,
+        fmi2Status s = instance_get_integer(w->inner, (const fmi2ValueReference *)valueReferences + k,
                                       n, buf);
         if (s != fmi2OK) {
             return status3(s);
@@ -492,7 +485,7 @@ fmi3Status fmi3SetInt64(fmi3Instance instance, const fmi3ValueReference valueRef
     for (size_t k = 0; k < nValueReferences; k++) {
         buf[k] = (fmi2Integer)values[k];
     }
-    s = fmi2SetInteger(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
+    s = instance_set_integer(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
                        buf);
     free(buf);
     return status3(s);
@@ -508,7 +501,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
     }
     for (size_t k = 0; k < nValueReferences; k += 64) {
         size_t n = nValueReferences - k < 64 ? nValueReferences - k : 64;
-        fmi2Status s = fmi2GetBoolean(w->inner, (const fmi2ValueReference *)valueReferences + k,
+        fmi2Status s = instance_get_boolean(w->inner, (const fmi2ValueReference *)valueReferences + k,
                                       n, buf);
         if (s != fmi2OK) {
             return status3(s);
@@ -539,7 +532,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
     for (size_t k = 0; k < nValueReferences; k++) {
         buf[k] = values[k] ? fmi2True : fmi2False;
     }
-    s = fmi2SetBoolean(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
+    s = instance_set_boolean(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
                        buf);
     free(buf);
     return status3(s);
@@ -552,7 +545,7 @@ fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueRe
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetString")) {
         return fmi3Error;
     }
-    return status3(fmi2GetString(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(instance_get_string(w->inner, (const fmi2ValueReference *)valueReferences,
                             nValueReferences, values));
 }
 
@@ -563,7 +556,7 @@ fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueRe
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetString")) {
         return fmi3Error;
     }
-    return status3(fmi2SetString(w->inner, (const fmi2ValueReference *)valueReferences,
+    return status3(instance_set_string(w->inner, (const fmi2ValueReference *)valueReferences,
                             nValueReferences, values));
 }
 
@@ -572,39 +565,39 @@ fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueRe
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     WRAP("fmi3GetFMUState");
-    return status3(fmi2GetFMUstate(w->inner, FMUState));
+    return status3(instance_get_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
     WRAP("fmi3SetFMUState");
-    return status3(fmi2SetFMUstate(w->inner, FMUState));
+    return status3(instance_set_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     WRAP("fmi3FreeFMUState");
-    return status3(fmi2FreeFMUstate(w->inner, FMUState));
+    return status3(instance_free_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
     WRAP("fmi3SerializedFMUStateSize");
-    return status3(fmi2SerializedFMUstateSize(w->inner, FMUState, size));
+    return status3(instance_serialized_size(w->inner, FMUState, size));
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
                                  fmi3Byte serializedState[], size_t size)
 {
     WRAP("fmi3SerializeFMUState");
-    return status3(fmi2SerializeFMUstate(w->inner, FMUState, (fmi2Byte *)serializedState, size));
+    return status3(instance_serialize(w->inner, FMUState, (fmi2Byte *)serializedState, size));
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
                                    size_t size, fmi3FMUState *FMUState)
 {
     WRAP("fmi3DeserializeFMUState");
-    return status3(fmi2DeSerializeFMUstate(w->inner, (const fmi2Byte *)serializedState, size,
+    return status3(instance_deserialize(w->inner, (const fmi2Byte *)serializedState, size,
                                       FMUState));
 }
 /* --- Co-Simulation: fmi3DoStep, fmi3EnterStepMode in fmi3_cosim.c ---------------------------- */

@@ -1,12 +1,11 @@
-/* The FMI 3.0 instance of the native FMUs, shared by fmi3_glue.c (the FMI 2.0 layer, lifecycle,
+/* The FMI 3.0 instance of the native FMUs, shared by fmi3_glue.c (lifecycle,
  * values, FMU state, co-simulation), fmi3_events.c (Model Exchange, the clock of Scheduled
- * Execution) and fmi3_stubs.c (what these FMUs do not provide). A Wrapper holds the FMI 2.0
- * instance (instance.h), which has all the state, and what FMI 3.0 adds to it. */
+ * Execution) and fmi3_stubs.c (what these FMUs do not provide). A Wrapper holds the instance of
+ * the instance core (instance.h), which has all the state, and what FMI 3.0 adds to it. */
 #ifndef FMI3_WRAPPER_H
 #define FMI3_WRAPPER_H
 
 #include "fmi3Functions.h"
-#include "fmi2_hidden.h" /* the FMI 2 layer's functions, under their internal names */
 #include "glue.h"
 #include "instance.h"
 #include "fmi3_config.h" /* VR_TIME, VR_INDICATOR; HAS_CLOCK, VR_CLOCK, CLOCK_PERIOD_VR;
@@ -18,7 +17,7 @@ typedef enum { K_ME, K_CS, K_SE } Kind;
 
 typedef struct {
     unsigned magic; /* WRAPPER_MAGIC while alive; fmi3FreeInstance clears it */
-    Instance *inner; /* the FMI 2 instance (fmi2_glue.c): all the state */
+    Instance *inner; /* the instance core's instance (instance.c): all the state */
     Kind kind;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
@@ -48,6 +47,9 @@ Wrapper *wrapper_of(fmi3Instance instance, const char *function);
 /* 1 unless w is inside the intermediate update callback and function is not a getter of
  * variable values (the only calls the standard allows there; logged). */
 int allowed_in_update(Wrapper *w, const char *function);
+/* fmi3_glue.c: the model step of fmi3DoStep (model_step, or with early return on, one that stops
+ * at the next discrete-state switch) */
+int model_step_fmi3(Data *d, double t, double h, char *msg);
 /* Co-Simulation Event Mode (fmi3_cosim.c): fmi3EnterEventMode, fmi3UpdateDiscreteStates. */
 fmi3Status cs_enter_event_mode(Wrapper *w);
 fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeedUpdate,

@@ -1,9 +1,10 @@
-/* The shared FMI 2.0 co-simulation layer of the native FMUs, and what a model provides.
+/* The model API of the native FMUs: what a model provides, and the Data it works on.
  *
  * Each model folder (native/plant, native/controller) holds config.h (generated from the model's
  * Python variable table: value references, types, start values, ranges), model.h (its ModelState:
- * plain data, copied for FMU states) and model.c (model_initialize, model_step). fmi2_glue.c
- * implements every fmi2* function once, for any model, on the Data below.
+ * plain data, copied for FMU states) and model.c (model_initialize, model_step). The instance core (instance.c,
+ * instance.h) drives any model through these functions on the Data below; the FMI 2.0 glue
+ * (fmi2_glue.c) and the FMI 3.0 glue (fmi3_*.c) call the core.
  *
  * Conventions mirror the Python FMUs (impedance_cosim/fmi/slave.py):
  * - variables are stored by value reference: Real in r[], Integer and Boolean in i[], String in s[];

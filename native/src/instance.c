@@ -1,4 +1,6 @@
-/* The FMI 2.0 co-simulation interface of every native model, written once (see glue.h).
+/* The instance core of every native model, written once (see glue.h and instance.h): what the
+ * FMI 2.0 glue (fmi2_glue.c) and the FMI 3.0 glue (fmi3_*.c) both call. Its messages name the
+ * FMI 2.0 functions; the FMI 3.0 glue's logger renames them.
  *
  * State machine (FMI 2.0, section 4.2.4): instantiated -> initialization mode -> step complete
  * -> terminated; a call out of order returns fmi2Error with a logged message and changes nothing.
@@ -20,8 +22,7 @@
 #include "fmi2Functions.h"
 #include "glue.h"
 #include "guid.h" /* MODEL_GUID, written by the build */
-#include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is fmi2_me.c */
-#include "partials.h" /* directional and output derivatives (partials.c) */
+#include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is instance_me.c */
 
 #define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
 #define STATE_MAGIC 0x494d5053u    /* "IMPS" */
@@ -90,10 +91,6 @@ void log_message(Instance *inst, fmi2Status status, const char *category, const 
     safe[k] = '\0';
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
 }
-
-/* A function this FMU does not provide: fmi2Error, logged when the instance is alive. */
-#define REFUSE(c, function, ...)                                                                   \
-    (instance_ok((Instance *)(c), function) ? ERROR((Instance *)(c), __VA_ARGS__) : fmi2Error)
 
 int instance_ok(const Instance *inst, const char *function)
 {
@@ -170,10 +167,7 @@ static int initialize(Instance *inst)
 
 /* ---------------------------------------------------------------------------------------------- */
 
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
-
-fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+fmi2Component instance_new(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation,
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible,
                               fmi2Boolean loggingOn)
@@ -213,7 +207,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return inst;
 }
 
-void fmi2FreeInstance(fmi2Component c)
+void instance_free(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2FreeInstance")) {
@@ -223,7 +217,7 @@ void fmi2FreeInstance(fmi2Component c)
     free(inst);
 }
 
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+fmi2Status instance_set_logging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[])
 {
     (void)nCategories;
@@ -235,7 +229,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     return fmi2OK;
 }
 
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+fmi2Status instance_setup(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
     Instance *inst = (Instance *)c;
@@ -258,7 +252,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     return fmi2OK;
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+fmi2Status instance_enter_initialization(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2EnterInitializationMode")) {
@@ -272,7 +266,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c)
     return fmi2OK;
 }
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+fmi2Status instance_exit_initialization(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2ExitInitializationMode")) {
@@ -288,7 +282,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     return fmi2OK;
 }
 
-fmi2Status fmi2Terminate(fmi2Component c)
+fmi2Status instance_terminate(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2Terminate")) {
@@ -301,7 +295,7 @@ fmi2Status fmi2Terminate(fmi2Component c)
     return fmi2OK;
 }
 
-fmi2Status fmi2Reset(fmi2Component c)
+fmi2Status instance_reset(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2Reset")) {
@@ -391,7 +385,7 @@ static void mark_dirty(Instance *inst)
     }
 }
 
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_get_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        fmi2Real value[])
 {
     Instance *inst = (Instance *)c;
@@ -405,7 +399,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     return fmi2OK;
 }
 
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_get_integer(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           fmi2Integer value[])
 {
     Instance *inst = (Instance *)c;
@@ -419,7 +413,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_get_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           fmi2Boolean value[])
 {
     Instance *inst = (Instance *)c;
@@ -433,7 +427,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_get_string(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          fmi2String value[])
 {
     Instance *inst = (Instance *)c;
@@ -447,7 +441,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return fmi2OK;
 }
 
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[])
 {
     Instance *inst = (Instance *)c;
@@ -480,7 +474,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     return fmi2OK;
 }
 
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_set_integer(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           const fmi2Integer value[])
 {
     Instance *inst = (Instance *)c;
@@ -501,7 +495,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_set_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           const fmi2Boolean value[])
 {
     Instance *inst = (Instance *)c;
@@ -516,7 +510,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status instance_set_string(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          const fmi2String value[])
 {
     Instance *inst = (Instance *)c;
@@ -540,8 +534,9 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 /* --- stepping ------------------------------------------------------------------------------- */
 
-fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
-                      fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+fmi2Status instance_do_step(fmi2Component c, fmi2Real currentCommunicationPoint,
+                            fmi2Real communicationStepSize,
+                            fmi2Boolean noSetFMUStatePriorToCurrentPoint, Stepper step)
 {
     Instance *inst = (Instance *)c;
     ModelState backup_m;
@@ -562,7 +557,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
      * the step is refused (cheaper than stepping a full copy of Data). */
     backup_m = inst->s.d.m;
     memcpy(backup_r, inst->s.d.r, sizeof backup_r);
-    if (model_step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg)) {
+    if (step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg)) {
         inst->s.d.m = backup_m;
         memcpy(inst->s.d.r, backup_r, sizeof backup_r);
         log_message(inst, fmi2Error, "logStatusError", "at t=%.17g: %s",
@@ -574,11 +569,6 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     inst->s.last_time = currentCommunicationPoint + communicationStepSize;
     inst->step_refused = 0;
     return fmi2OK;
-}
-
-fmi2Status fmi2CancelStep(fmi2Component c)
-{
-    return REFUSE(c, "fmi2CancelStep", "fmi2CancelStep: doStep never runs asynchronously");
 }
 
 /* --- FMU state -------------------------------------------------------------------------------- */
@@ -673,7 +663,7 @@ static StateBox *state_for_writing(Instance *inst, fmi2FMUstate *state, const ch
     return box;
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+fmi2Status instance_get_state(fmi2Component c, fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
     StateBox *box;
@@ -691,7 +681,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
     return fmi2OK;
 }
 
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+fmi2Status instance_set_state(fmi2Component c, fmi2FMUstate state)
 {
     Instance *inst = (Instance *)c;
     const StateBox *box = (const StateBox *)state;
@@ -711,7 +701,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
     return fmi2OK;
 }
 
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+fmi2Status instance_free_state(fmi2Component c, fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
     StateBox *box;
@@ -789,7 +779,7 @@ static void serial_header(SerialHeader *header)
     memcpy(header->guid, MODEL_GUID, sizeof MODEL_GUID);
 }
 
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+fmi2Status instance_serialized_size(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2SerializedFMUstateSize")) {
@@ -805,7 +795,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_
     return fmi2OK;
 }
 
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[],
+fmi2Status instance_serialize(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[],
                                  size_t size)
 {
     Instance *inst = (Instance *)c;
@@ -869,7 +859,7 @@ static int decode_state(const unsigned char *bytes, size_t size, Snapshot *body,
     return check_finite(body, msg);
 }
 
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+fmi2Status instance_deserialize(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
@@ -894,81 +884,4 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     }
     box->s = body;
     return fmi2OK;
-}
-
-/* --- not supported / status --------------------------------------------------------------------- */
-
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
-                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[],
-                                        size_t nKnown, const fmi2Real dvKnown[],
-                                        fmi2Real dvUnknown[])
-{
-    return partials_directional((Instance *)c, "fmi2GetDirectionalDerivative", vUnknown_ref,
-                                nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown);
-}
-
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                                       const fmi2Integer order[], const fmi2Real value[])
-{
-    (void)vr, (void)nvr, (void)order, (void)value;
-    return REFUSE(c, "fmi2SetRealInputDerivatives", "input derivatives are not supported (canInterpolateInputs=false)");
-}
-
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                                        const fmi2Integer order[], fmi2Real value[])
-{
-    return partials_output_derivatives((Instance *)c, "fmi2GetRealOutputDerivatives", vr, nvr,
-                                       order, value);
-}
-
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
-{
-    (void)s, (void)value;
-    return REFUSE(c, "fmi2GetStatus", "fmi2GetStatus: no asynchronous step to report on");
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
-{
-    Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2GetRealStatus")) {
-        return fmi2Error;
-    }
-    if (!value) {
-        return ERROR(inst, "fmi2GetRealStatus: value is NULL");
-    }
-    if (s != fmi2LastSuccessfulTime) {
-        return ERROR(inst, "fmi2GetRealStatus supports fmi2LastSuccessfulTime only");
-    }
-    *value = inst->s.last_time;
-    return fmi2OK;
-}
-
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
-{
-    (void)s, (void)value;
-    return REFUSE(c, "fmi2GetIntegerStatus", "fmi2GetIntegerStatus: no integer status");
-}
-
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
-{
-    Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2GetBooleanStatus")) {
-        return fmi2Error;
-    }
-    if (!value) {
-        return ERROR(inst, "fmi2GetBooleanStatus: value is NULL");
-    }
-    if (s != fmi2Terminated) {
-        return ERROR(inst, "fmi2GetBooleanStatus supports fmi2Terminated only");
-    }
-    /* after a refused step: the same step would be refused again (the model is deterministic),
-     * so the master must stop (or go on from another FMU state or with a smaller step) */
-    *value = inst->step_refused ? fmi2True : fmi2False;
-    return fmi2OK;
-}
-
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
-{
-    (void)s, (void)value;
-    return REFUSE(c, "fmi2GetStringStatus", "fmi2GetStringStatus: no string status");
 }

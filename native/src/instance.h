@@ -1,5 +1,5 @@
-/* The instance of a native FMU, shared by the co-simulation glue (fmi2_glue.c) and the
- * Model Exchange entry points (fmi2_me.c).
+/* The instance of a native FMU and the instance core over it (instance.c, instance_me.c), which
+ * the FMI 2.0 glue (fmi2_glue.c, fmi2_me.c) and the FMI 3.0 glue (fmi3_*.c) both call.
  *
  * Phases follow the FMI 2.0 state machines: co-simulation (section 4.2.4) steps in
  * S_STEP_COMPLETE; Model Exchange (section 3.2.3) alternates between S_EVENT_MODE and
@@ -59,12 +59,72 @@ void log_message(Instance *inst, fmi2Status status, const char *category, const 
  * for a live instance, else 0. */
 int instance_ok(const Instance *inst, const char *function);
 
-/* fmi2_me.c: after model_initialize under Model Exchange, check that the model's settings make
+/* instance_me.c: after model_initialize under Model Exchange, check that the model's settings make
  * sense there and compute outputs and derivatives (0, or 1 with a message in msg). */
 int me_initialize(Data *d, char *msg);
-/* fmi2_me.c: recompute outputs and derivatives at the current state and inputs if needed. */
+/* instance_me.c: recompute outputs and derivatives at the current state and inputs if needed. */
 fmi2Status me_update(Instance *inst);
 
 #include "model_me.h" /* ME_SUPPORTED, the model_me_* functions */
+
+/* The instance core (instance.c), called by the FMI 2.0 glue (fmi2_glue.c: each fmi2* function
+ * calls the one named after it) and by the FMI 3.0 glue (fmi3_*.c). Messages name the FMI 2.0
+ * functions; the FMI 3.0 glue's logger names its own. */
+typedef int (*Stepper)(Data *d, double t, double h, char *msg); /* model_step, or a variant */
+fmi2Component instance_new(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                           fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                           fmi2Boolean visible, fmi2Boolean loggingOn);
+void instance_free(fmi2Component c);
+fmi2Status instance_set_logging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                                const fmi2String categories[]);
+fmi2Status instance_setup(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                          fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime);
+fmi2Status instance_enter_initialization(fmi2Component c);
+fmi2Status instance_exit_initialization(fmi2Component c);
+fmi2Status instance_terminate(fmi2Component c);
+fmi2Status instance_reset(fmi2Component c);
+fmi2Status instance_get_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                             fmi2Real value[]);
+fmi2Status instance_get_integer(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                fmi2Integer value[]);
+fmi2Status instance_get_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                fmi2Boolean value[]);
+fmi2Status instance_get_string(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                               fmi2String value[]);
+fmi2Status instance_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                             const fmi2Real value[]);
+fmi2Status instance_set_integer(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                const fmi2Integer value[]);
+fmi2Status instance_set_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                const fmi2Boolean value[]);
+fmi2Status instance_set_string(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                               const fmi2String value[]);
+fmi2Status instance_do_step(fmi2Component c, fmi2Real currentCommunicationPoint,
+                            fmi2Real communicationStepSize,
+                            fmi2Boolean noSetFMUStatePriorToCurrentPoint, Stepper step);
+fmi2Status instance_get_state(fmi2Component c, fmi2FMUstate *state);
+fmi2Status instance_set_state(fmi2Component c, fmi2FMUstate state);
+fmi2Status instance_free_state(fmi2Component c, fmi2FMUstate *state);
+fmi2Status instance_serialized_size(fmi2Component c, fmi2FMUstate state, size_t *size);
+fmi2Status instance_serialize(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[],
+                              size_t size);
+fmi2Status instance_deserialize(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                fmi2FMUstate *state);
+
+/* The Model Exchange side (instance_me.c; models whose config.h defines MODEL_EXCHANGE). */
+fmi2Status instance_enter_event_mode(fmi2Component c);
+fmi2Status instance_new_discrete_states(fmi2Component c, fmi2EventInfo *eventInfo);
+fmi2Status instance_enter_continuous_time_mode(fmi2Component c);
+fmi2Status instance_completed_integrator_step(fmi2Component c,
+                                              fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                              fmi2Boolean *enterEventMode,
+                                              fmi2Boolean *terminateSimulation);
+fmi2Status instance_set_time(fmi2Component c, fmi2Real time);
+fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], size_t nx);
+fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t nx);
+fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t nx);
+fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], size_t nx);
+fmi2Status instance_get_event_indicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni);
+
 
 #endif

@@ -1,5 +1,6 @@
-/* The FMI 2.0 Model Exchange interface of the native models that offer it (config.h defines
- * MODEL_EXCHANGE), in the same binary as their co-simulation interface (fmi2_glue.c).
+/* The instance core's Model Exchange side, for the native models that offer it (config.h defines
+ * MODEL_EXCHANGE): called by the FMI 2.0 entry points (fmi2_me.c) and the FMI 3.0 glue
+ * (fmi3_events.c).
  *
  * State machine (FMI 2.0, section 3.2.3): instantiated -> initialization mode -> event mode
  * <-> continuous-time mode -> terminated; a call out of order returns fmi2Error with a logged
@@ -97,14 +98,14 @@ static fmi2Status refresh(Instance *inst)
 {
     if (inst->s.phase == S_INITIALIZATION) {
         const fmi2ValueReference none[1] = {0};
-        return fmi2GetReal(inst, none, 0, NULL);
+        return instance_get_real(inst, none, 0, NULL);
     }
     return me_update(inst);
 }
 
 /* --- mode changes --------------------------------------------------------------------------- */
 
-fmi2Status fmi2EnterEventMode(fmi2Component c)
+fmi2Status instance_enter_event_mode(fmi2Component c)
 {
     Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2EnterEventMode");
     if (!inst) {
@@ -115,7 +116,7 @@ fmi2Status fmi2EnterEventMode(fmi2Component c)
     return fmi2OK;
 }
 
-fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
+fmi2Status instance_new_discrete_states(fmi2Component c, fmi2EventInfo *eventInfo)
 {
     Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2NewDiscreteStates");
     MeEvent ev = {0, 0, 0, 0.0};
@@ -145,7 +146,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
     return fmi2OK;
 }
 
-fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
+fmi2Status instance_enter_continuous_time_mode(fmi2Component c)
 {
     Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2EnterContinuousTimeMode");
     if (!inst) {
@@ -155,7 +156,7 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
     return fmi2OK;
 }
 
-fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
+fmi2Status instance_completed_integrator_step(fmi2Component c,
                                        fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode,
                                        fmi2Boolean *terminateSimulation)
@@ -175,7 +176,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
 
 /* --- time and states ------------------------------------------------------------------------ */
 
-fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
+fmi2Status instance_set_time(fmi2Component c, fmi2Real time)
 {
     Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2SetTime");
     if (!inst) {
@@ -191,7 +192,7 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
     return fmi2OK;
 }
 
-fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
+fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], size_t nx)
 {
     Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2SetContinuousStates");
     if (!inst) {
@@ -211,7 +212,7 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
     return fmi2OK;
 }
 
-fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
+fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t nx)
 {
     Instance *inst = me_instance(c, EVALUATED, "fmi2GetContinuousStates");
     fmi2Status status;
@@ -229,7 +230,7 @@ fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
     return fmi2OK;
 }
 
-fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
+fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
     Instance *inst = me_instance(c, IN(S_INSTANTIATED) | EVALUATED,
                                  "fmi2GetNominalsOfContinuousStates");
@@ -247,7 +248,7 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal
 
 /* --- model equations ------------------------------------------------------------------------ */
 
-fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
+fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
     Instance *inst = me_instance(c, EVALUATED, "fmi2GetDerivatives");
     fmi2Status status;
@@ -269,7 +270,7 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
     return fmi2OK;
 }
 
-fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
+fmi2Status instance_get_event_indicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
 {
     Instance *inst = me_instance(c, EVALUATED, "fmi2GetEventIndicators");
     fmi2Status status;

@@ -1,4 +1,4 @@
-/* What a native model implements to offer FMI 2.0 Model Exchange (fmi2_me.c calls it): models
+/* What a native model implements to offer FMI 2.0 Model Exchange (instance_me.c calls it): models
  * whose generated config.h defines MODEL_EXCHANGE (with N_STATES, N_EVENT_INDICATORS and
  * DERIVATIVE_VRS[]). Their continuous states live in the model's own state (d->m). */
 #ifndef MODEL_ME_H

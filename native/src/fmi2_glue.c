@@ -1,0 +1,232 @@
+/* The FMI 2.0 interface of every native model: the exported fmi2* functions (Co-Simulation and
+ * those common to both interfaces; Model Exchange: fmi2_me.c). Each calls the instance core
+ * (instance.c: the state machine, the checks, the FMU-state format; see instance.h), which the
+ * FMI 3.0 glue (fmi3_glue.c) calls too; fmi2DoStep steps with the model's own model_step. What
+ * only FMI 2.0 has (the status queries, the entry points of the partial derivatives) is here.
+ */
+#include "fmi2Functions.h"
+#include "glue.h"
+#include "instance.h"
+#include "partials.h" /* directional and output derivatives (partials.c) */
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation,
+                              const fmi2CallbackFunctions *functions, fmi2Boolean visible,
+                              fmi2Boolean loggingOn)
+{
+    return instance_new(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible,
+                        loggingOn);
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    instance_free(c);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    return instance_set_logging(c, loggingOn, nCategories, categories);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    return instance_setup(c, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    return instance_enter_initialization(c);
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    return instance_exit_initialization(c);
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    return instance_terminate(c);
+}
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    return instance_reset(c);
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    return instance_get_real(c, vr, nvr, value);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Integer value[])
+{
+    return instance_get_integer(c, vr, nvr, value);
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Boolean value[])
+{
+    return instance_get_boolean(c, vr, nvr, value);
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                         fmi2String value[])
+{
+    return instance_get_string(c, vr, nvr, value);
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                       const fmi2Real value[])
+{
+    return instance_set_real(c, vr, nvr, value);
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Integer value[])
+{
+    return instance_set_integer(c, vr, nvr, value);
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Boolean value[])
+{
+    return instance_set_boolean(c, vr, nvr, value);
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                         const fmi2String value[])
+{
+    return instance_set_string(c, vr, nvr, value);
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
+                      fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    return instance_do_step(c, currentCommunicationPoint, communicationStepSize,
+                            noSetFMUStatePriorToCurrentPoint, model_step);
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    return instance_get_state(c, state);
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    return instance_set_state(c, state);
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    return instance_free_state(c, state);
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    return instance_serialized_size(c, state, size);
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[],
+                                 size_t size)
+{
+    return instance_serialize(c, state, serializedState, size);
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *state)
+{
+    return instance_deserialize(c, serializedState, size, state);
+}
+
+/* A function this FMU does not provide: fmi2Error, logged when the instance is alive. */
+#define REFUSE(c, function, ...)                                                                   \
+    (instance_ok((Instance *)(c), function) ? ERROR((Instance *)(c), __VA_ARGS__) : fmi2Error)
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    return REFUSE(c, "fmi2CancelStep", "fmi2CancelStep: doStep never runs asynchronously");
+}
+
+/* --- what only FMI 2.0 has: status queries, derivatives' entry points ------------------------ */
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
+                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[],
+                                        size_t nKnown, const fmi2Real dvKnown[],
+                                        fmi2Real dvUnknown[])
+{
+    return partials_directional((Instance *)c, "fmi2GetDirectionalDerivative", vUnknown_ref,
+                                nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown);
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return REFUSE(c, "fmi2SetRealInputDerivatives",
+                  "input derivatives are not supported (canInterpolateInputs=false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    return partials_output_derivatives((Instance *)c, "fmi2GetRealOutputDerivatives", vr, nvr,
+                                       order, value);
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    (void)s, (void)value;
+    return REFUSE(c, "fmi2GetStatus", "fmi2GetStatus: no asynchronous step to report on");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    Instance *inst = (Instance *)c;
+    if (!instance_ok(inst, "fmi2GetRealStatus")) {
+        return fmi2Error;
+    }
+    if (!value) {
+        return ERROR(inst, "fmi2GetRealStatus: value is NULL");
+    }
+    if (s != fmi2LastSuccessfulTime) {
+        return ERROR(inst, "fmi2GetRealStatus supports fmi2LastSuccessfulTime only");
+    }
+    *value = inst->s.last_time;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    (void)s, (void)value;
+    return REFUSE(c, "fmi2GetIntegerStatus", "fmi2GetIntegerStatus: no integer status");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    Instance *inst = (Instance *)c;
+    if (!instance_ok(inst, "fmi2GetBooleanStatus")) {
+        return fmi2Error;
+    }
+    if (!value) {
+        return ERROR(inst, "fmi2GetBooleanStatus: value is NULL");
+    }
+    if (s != fmi2Terminated) {
+        return ERROR(inst, "fmi2GetBooleanStatus supports fmi2Terminated only");
+    }
+    /* after a refused step: the same step would be refused again (the model is deterministic),
+     * so the master must stop (or go on from another FMU state or with a smaller step) */
+    *value = inst->step_refused ? fmi2True : fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    (void)s, (void)value;
+    return REFUSE(c, "fmi2GetStringStatus", "fmi2GetStringStatus: no string status");
+}

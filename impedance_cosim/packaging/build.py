@@ -188,9 +188,9 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 NATIVE = REPO / "native"
 # every native FMU's sources, whatever its FMI version: the model API (glue.h, model_me.h,
 # model_partials.h), the instance core, the arm, the integrator
-NATIVE_SHARED = ("instance.c", "glue.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
+NATIVE_SHARED = ("glue.h", "instance.h", "instance.c", "instance_values.c", "instance_state.c",
+                 "instance_me.c", "model_me.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
                  "ode.c", "ode.h", "pyrandom.c", "pyrandom.h",
-                 "instance_me.c", "instance.h", "model_me.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",
                  "model_partials.h")  # fmt: skip
 FMI2_GLUE = ("fmi2_glue.c", "fmi2_me.c")  # the exported fmi2* functions

@@ -41,6 +41,7 @@ from impedance_cosim.version import __version__
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 FMI3_GLUE = (
     "fmi3_glue.c",
+    "fmi3_values.c",  # getters and setters
     "fmi3_events.c",
     "fmi3_cosim.c",  # fmi3DoStep: early return, intermediate update, event mode in CS
     "fmi3_stubs.c",

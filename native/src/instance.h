@@ -45,6 +45,14 @@ typedef struct {
     char msg[MSG_MAX];
 } Instance;
 
+/* Initialize the instance's Data from its parameters and inputs (model_initialize, and under
+ * Model Exchange me_initialize; instance.c): 0, or 1 with the reason in inst->msg. */
+int initialize(Instance *inst);
+
+/* A parameter value the model can accept at all: finite, and not below its minimum (instance.c;
+ * 0, or 1 with msg set). */
+int check_parameter(int vr, double value, char *msg);
+
 /* Log through the host's logger: errors always, other messages when logging is on. */
 void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...);
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from impedance_cosim.cosim.fmu3 import open_fmu
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.fmus.fmi3 import open_fmu
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 H, STOP = 1 / 400, 20.0
 

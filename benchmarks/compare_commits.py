@@ -20,8 +20,8 @@ HERE = Path(__file__).resolve().parent.parent
 
 RUN = """
 import hashlib, sys, time
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 system = read_ssp(sys.argv[1])
 best = None
 for _ in range(int(sys.argv[2])):

@@ -17,16 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
-from impedance_cosim.cosim.engines import (
+from impedance_cosim.cosim.engines.others import (
     AccumulatedTimes,
     nanosecond_times,
     run_in_ecospy,
     run_in_fmpy,
     run_in_libcosim,
 )
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import CONNECTIONS, SCENARIOS
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import CONNECTIONS, SCENARIOS
 
 H = 0.0025
 SIGNALS = sorted({f"{se}.{sc}" for se, sc, _, _ in CONNECTIONS})

@@ -1,11 +1,12 @@
 """Event-exact stepping against the fixed step (issue 23), on the FMI 3.0 archive (not a test).
 
 For each run (the 20 s paper scenario, each velocity source, Gauss-Seidel, and the observer under
-Jacobi) it runs our master twice: fixed step, and EventExactMaster (cosim/events.py: the plant
-returns early at each contact switch, the master handles the event in Event Mode and completes the
-communication step). It prints the number of contact events, the exact switch times against the
-first grid row that shows the change (contact_force > 0 or back to 0), the impact peak of each
-run, and the largest difference of any recorded output between the two runs, with wall times.
+Jacobi) it runs our master twice: fixed step, and EventExactMaster (cosim/master/events.py: the
+plant returns early at each contact switch, the master handles the event in Event Mode and
+completes the communication step). It prints the number of contact events, the exact switch times
+against the first grid row that shows the change (contact_force > 0 or back to 0), the impact peak
+of each run, and the largest difference of any recorded output between the two runs, with wall
+times.
 
     python benchmarks/event_stepping.py [--stop 20]   (build first: impedance-cosim build)
 """
@@ -18,9 +19,9 @@ import time
 
 import numpy as np
 
-from impedance_cosim.cosim.events import EventExactMaster
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.events import EventExactMaster
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 
 RUNS = [("observer", "gauss-seidel"), ("difference", "gauss-seidel"),

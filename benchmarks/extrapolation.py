@@ -27,8 +27,8 @@ import numpy as np
 from impedance_cosim.apps import linearize as lin
 from impedance_cosim.apps.stability.bisection import QUANTITIES, Bisection, Case
 from impedance_cosim.apps.sweep.plan import master_arguments
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 SSP = Path(__file__).resolve().parent.parent / "fmus" / "PaperScenario-native.ssp"
 SIGNALS = ("plant.contact_force", "plant.x", "plant.y")

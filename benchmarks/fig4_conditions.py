@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master.plain_loop import run_models
 
 SENSORS = [
     ("ideal", {}),

@@ -44,10 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-from impedance_cosim.cosim import master as master_module
-from impedance_cosim.cosim.engines import run_in_libcosim
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.engines.others import run_in_libcosim
+from impedance_cosim.cosim.master import master as master_module
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 HERE = Path(__file__).resolve().parent
 ARCHIVE = HERE.parent / "fmus" / "PaperScenario-native-observer.ssp"
@@ -184,7 +184,7 @@ def build_container(system, folder: Path) -> Path:
 
 
 def read_descriptions(files: dict[str, Path]):
-    from impedance_cosim.cosim.run_setup import read_descriptions as read
+    from impedance_cosim.cosim.master.setup import read_descriptions as read
 
     return read(files)
 

@@ -19,9 +19,9 @@ import time
 import zipfile
 from pathlib import Path
 
-from impedance_cosim.cosim.loop import run_models
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.plain_loop import run_models
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
 
@@ -29,7 +29,7 @@ from impedance_cosim.packaging.build_all import build_all
 def time_fmpy(ssp: Path, stop: float, step: float) -> float:
     import fmpy.ssp.simulation as sim
 
-    from impedance_cosim.cosim.engines import fmpy_bindings
+    from impedance_cosim.cosim.engines.others import fmpy_bindings
 
     original = sim.instantiate_fmu
 

@@ -6,7 +6,7 @@ numbers). Needs the native FMUs (impedance-cosim build).
 2. The paper scenario's torques (our master on PaperScenario-native.ssp) replayed open loop into
    the ME plant: max joint-angle difference to the CS plant over 20 s, contact-time difference,
    wall time. Also with the torque steps placed exactly at t_i (fmpy's root function then hands
-   CVode the previous torque after every restart; see impedance_cosim/cosim/replay.py).
+   CVode the previous torque after every restart; see impedance_cosim/cosim/engines/replay.py).
 
     python benchmarks/model_exchange.py
 """
@@ -18,9 +18,9 @@ import time
 import numpy as np
 from fmpy import simulate_fmu
 
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.replay import cs_crossing_times, me_replay
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.engines.replay import cs_crossing_times, me_replay
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 
 PLANT = DEFAULT_OUT / "native" / "PumaPlant.fmu"

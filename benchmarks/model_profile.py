@@ -1,6 +1,6 @@
 """Where the Python models spend their time in the 20 s paper scenario (not a test): the plain
-closed loop (impedance_cosim.cosim.loop, no FMI) under cProfile, grouped by what the code computes,
-with the number of plant right-hand-side evaluations per communication step.
+closed loop (impedance_cosim.cosim.master.plain_loop, no FMI) under cProfile, grouped by what the
+code computes, with the number of plant right-hand-side evaluations per communication step.
 
     python benchmarks/model_profile.py [--stop 20]
 """
@@ -12,7 +12,7 @@ import cProfile
 import pstats
 import time
 
-from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master.plain_loop import run_models
 from impedance_cosim.physics import ode
 
 GROUPS = {  # (file suffix, function) -> group; everything else is "other"
@@ -70,8 +70,8 @@ def fmi_layer(stop: float) -> tuple[float, float]:
     their own module copies (packaging/isolate.py): their ModelSlave is patched once loaded."""
     import sys
 
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.ssp.read import read_ssp
     from impedance_cosim.packaging.build import DEFAULT_OUT
 
     system = read_ssp(DEFAULT_OUT / "PaperScenario.ssp")

@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
 

@@ -1,7 +1,7 @@
 """The paper scenario in another engine, libcosim, next to our master (not a test: prints numbers).
 
 Runs fmus/PaperScenario.ssp (built if missing) in libcosim's fixed-step algorithm (Jacobi; see
-impedance_cosim/cosim/engines.py for its conventions), then in our master as Jacobi and as
+impedance_cosim/cosim/engines/others.py for its conventions), then in our master as Jacobi and as
 Gauss-Seidel, and prints the wall times and the largest differences on the main signals. --csv
 writes libcosim's rows (time and every output).
 
@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
-from impedance_cosim.cosim.engines import EngineError, run_in_libcosim
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.engines.others import EngineError, run_in_libcosim
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
 

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from impedance_cosim.apps.reference import reference_states
-from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master.plain_loop import run_models
 from plant_model.model import PlantModel
 
 DT = 1 / 400

@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.realtime import RealtimeOptions
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.realtime import RealtimeOptions
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
 

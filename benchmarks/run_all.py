@@ -25,9 +25,9 @@ from master_speed import time_fmpy
 
 from impedance_cosim.apps import sweep
 from impedance_cosim.apps.sweep import execute as sweep_batch
-from impedance_cosim.cosim.loop import run_models
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.plain_loop import run_models
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
 

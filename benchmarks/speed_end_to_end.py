@@ -50,8 +50,8 @@ def output_names(archive: Path) -> tuple[list[str], float]:
     """Every Real output of the archive's components ("component.variable"), and its step."""
     from fmpy import read_model_description
 
-    from impedance_cosim.cosim.run_setup import real_outputs
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.setup import real_outputs
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     system = read_ssp(archive)
     try:

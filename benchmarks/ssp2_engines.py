@@ -37,8 +37,8 @@ H = 0.0025
 
 
 def _ours(archive: Path, stop: float, algorithm: str) -> dict[str, np.ndarray]:
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     with read_ssp(archive) as system:
         run = Master(system, "observer", algorithm=algorithm, stop_time=stop).run()
@@ -50,7 +50,7 @@ def _ours(archive: Path, stop: float, algorithm: str) -> dict[str, np.ndarray]:
 def _container(archive: Path, stop: float) -> dict[str, np.ndarray]:
     """fmucontainer on the .ssp itself, then fmpy simulate on the container (no signal to
     compare: from an .ssp it exposes no linked output)."""
-    from impedance_cosim.cosim.containers import FMUCONTAINER, run_container
+    from impedance_cosim.cosim.engines.container import FMUCONTAINER, run_container
 
     with tempfile.TemporaryDirectory(prefix="impcosim_ssp2_") as tmp:
         shutil.copy(archive, Path(tmp) / "system.ssp")
@@ -86,7 +86,7 @@ def _pyssp(archive: Path) -> str:
 
 def attempt(engine: str, archive: Path, stop: float) -> dict[str, np.ndarray] | str:
     """One engine on one archive: the SIGNALS it computed (may be fewer), or what it read."""
-    from impedance_cosim.cosim import engines
+    from impedance_cosim.cosim.engines import others as engines
 
     if engine == "pyssp-standard":
         return _pyssp(archive)

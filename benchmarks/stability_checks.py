@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from impedance_cosim.apps import linearize as lin
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 SSP = Path(__file__).resolve().parent.parent / "fmus" / "PaperScenario-native.ssp"
 

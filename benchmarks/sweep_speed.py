@@ -128,9 +128,9 @@ def per_run_overhead() -> None:
     reused), CPU time by phase; overhead = everything but the C loop's stepping."""
     from impedance_cosim.apps.sweep import table, worker
     from impedance_cosim.apps.sweep.plan import archive_payload
-    from impedance_cosim.cosim import fastloop
-    from impedance_cosim.cosim import master as master_module
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master import c_loop as fastloop
+    from impedance_cosim.cosim.master import master as master_module
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     clock = time.process_time
     spent: dict[str, float] = {}

@@ -38,10 +38,10 @@ import numpy as np
 from impedance_cosim.apps import analysis
 from impedance_cosim.apps.options import DEFAULT_SSP
 from impedance_cosim.apps.run import echo_fmu_output
-from impedance_cosim.cosim import provenance
-from impedance_cosim.cosim.master import Master, MasterError, RunResult
-from impedance_cosim.cosim.results import Divergence, run_status
-from impedance_cosim.cosim.ssp import SspError, SystemDescription, read_ssp
+from impedance_cosim.cosim.master.master import Master, MasterError, RunResult
+from impedance_cosim.cosim.results import provenance
+from impedance_cosim.cosim.results.result import Divergence, run_status
+from impedance_cosim.cosim.ssp.read import SspError, SystemDescription, read_ssp
 from impedance_cosim.util.interrupt import RunInterrupted, StopSignals, signal_name
 
 if TYPE_CHECKING:
@@ -126,7 +126,7 @@ class Result:
     def to_csv(self, path: str | Path) -> Path:
         """Write the signals as the CLI's CSV (fmpy.util.read_csv reads it); returns the path.
         The file is whole or not there: WriteError (an OSError) naming path when it cannot be."""
-        from impedance_cosim.cosim.results import write_csv
+        from impedance_cosim.cosim.results.result import write_csv
         from impedance_cosim.util.atomic import WriteError
 
         path = Path(path)

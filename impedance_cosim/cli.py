@@ -144,9 +144,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     2 bad input, 1 a failed run or other error, 128 + signal number when interrupted; a command
     may return 3 itself: a run diverged, which is a result (cosim.results.exit_status)."""
     from impedance_cosim.apps.options import CliError
-    from impedance_cosim.cosim.fmu import FmuError
-    from impedance_cosim.cosim.master import MasterError
-    from impedance_cosim.cosim.ssp import SspError
+    from impedance_cosim.cosim.fmus.fmi2 import FmuError
+    from impedance_cosim.cosim.master.master import MasterError
+    from impedance_cosim.cosim.ssp.read import SspError
     from impedance_cosim.packaging.toolchains import CompileError
     from impedance_cosim.util.atomic import FolderBusyError
     from impedance_cosim.util.interrupt import RunInterrupted

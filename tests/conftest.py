@@ -46,7 +46,7 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     """Tests load Python FMUs into this process: once pytest has said everything, leave as our
     command does (fmu.exit_process), or pythonfmu 0.7's library destructor corrupts the heap at
     exit (glibc aborts: exit -6 after the last test passed, in some runs)."""
-    from impedance_cosim.cosim.fmu import exit_process, fmu_library_loaded
+    from impedance_cosim.cosim.fmus.fmi2 import exit_process, fmu_library_loaded
 
     status = getattr(config, "_impcosim_status", None)
     if status is not None and fmu_library_loaded():

@@ -22,10 +22,10 @@ from test_report import check_page
 import impedance_cosim as ic
 from impedance_cosim import api
 from impedance_cosim.cli import main
-from impedance_cosim.cosim.master import Master, MasterError
-from impedance_cosim.cosim.provenance import file_sha256
-from impedance_cosim.cosim.results import Feed
-from impedance_cosim.cosim.ssp import SspError
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.results.provenance import file_sha256
+from impedance_cosim.cosim.results.result import Feed
+from impedance_cosim.cosim.ssp.read import SspError
 from impedance_cosim.util.interrupt import RunInterrupted
 
 

@@ -20,10 +20,10 @@ from pathlib import Path
 import pytest
 
 from impedance_cosim.cosim.archive import DEFAULT_LIMITS, ArchiveError, unpack
-from impedance_cosim.cosim.fmu import FmuInstance
-from impedance_cosim.cosim.fmu_files import FmuArchiveError, FmuError
-from impedance_cosim.cosim.master import Master, MasterError
-from impedance_cosim.cosim.ssp import SspError, read_ssp
+from impedance_cosim.cosim.fmus.files import FmuArchiveError, FmuError
+from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.ssp.read import SspError, read_ssp
 
 PLANT = "PumaPlant.fmu"
 GIB = 2**30

@@ -84,7 +84,7 @@ def test_malformed_ssd_gives_a_one_line_error(ssp_path, tmp_path, capsys):
 @pytest.mark.slow
 def test_a_command_fails_when_any_of_its_runs_fails(ssp_path, tmp_path, capsys, monkeypatch):
     """`run` with figures also runs the other scenario of Fig. 4: its failure fails the command."""
-    from impedance_cosim.cosim.master import Master
+    from impedance_cosim.cosim.master.master import Master
 
     original = Master.run
 
@@ -106,7 +106,7 @@ def test_a_command_fails_when_any_of_its_runs_fails(ssp_path, tmp_path, capsys, 
 def test_results_csv_appears_only_when_closed(tmp_path):
     """The CSV is written under a temporary name and renamed into place when the stream closes
     (also on an exception), so the target name never holds a partial file."""
-    from impedance_cosim.cosim.results import CsvStream
+    from impedance_cosim.cosim.results.result import CsvStream
 
     path = tmp_path / "r.csv"
     with pytest.raises(RuntimeError), CsvStream(path) as stream:

@@ -19,11 +19,11 @@ from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.fmu import FmuError
-from impedance_cosim.cosim.fmu3 import open_fmu
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import SCENARIOS
+from impedance_cosim.cosim.fmus.fmi2 import FmuError
+from impedance_cosim.cosim.fmus.fmi3 import open_fmu
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import SCENARIOS
 from impedance_cosim.packaging.build_all import build_all
 from impedance_cosim.packaging.closedloop import fmu_name
 from plant_model.model import PlantModel

@@ -4,7 +4,7 @@ run under `fmpy simulate`, against our master's run of the same algorithm (issue
 The container cuts the plant-controller loop before the first FMU it lists; our SSDs list the
 plant first (system.SSD_ELEMENT_ORDER), so the controller is initialized from the plant's
 outputs. Sequential mode is Gauss-Seidel in that order, parallel mode is Jacobi
-(cosim/containers.py). Measured: bit-identical to our master in both modes on every row of
+(cosim/engines/container.py). Measured: bit-identical to our master in both modes on every row of
 every output (sequential: the full 20 s of all three scenarios; parallel: the observer
 scenario's 20 s). The tolerance below is 1e-9, absolute. Under Jacobi the difference and measured
 scenarios diverge (tests/test_engine_conformance.py), so their parallel containers are compared
@@ -16,15 +16,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impedance_cosim.cosim.containers import (
+from impedance_cosim.cosim.engines.container import (
     build_container,
     container_description,
     master_like_container,
     run_container,
 )
-from impedance_cosim.cosim.engines import EngineError
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import SCENARIOS, SSD_ELEMENT_ORDER
+from impedance_cosim.cosim.engines.others import EngineError
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import SCENARIOS, SSD_ELEMENT_ORDER
 from impedance_cosim.packaging.build import build_ssp
 
 pytest.importorskip("fmu_manipulation_toolbox")

@@ -16,8 +16,8 @@ from fmpy import simulate_fmu
 
 from controller_model.impedance_law import SingularPoseError
 from controller_model.model import INPUTS, ControllerModel
-from impedance_cosim.cosim.fmu import FmuError
-from impedance_cosim.cosim.fmu3 import open_fmu
+from impedance_cosim.cosim.fmus.fmi2 import FmuError
+from impedance_cosim.cosim.fmus.fmi3 import open_fmu
 from impedance_cosim.physics.arm import Arm
 
 TS = 1 / 400

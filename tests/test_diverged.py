@@ -14,7 +14,7 @@ from test_report import check_page
 import impedance_cosim as ic
 from impedance_cosim.apps import analysis
 from impedance_cosim.cli import main
-from impedance_cosim.cosim.results import Divergence, exit_status, run_status
+from impedance_cosim.cosim.results.result import Divergence, exit_status, run_status
 
 DIVERGED = "diverged at t = 0.4825 s: controller.tau1 beyond 1e6"  # the difference under Jacobi
 
@@ -178,8 +178,8 @@ def test_api_messages_say_what_an_api_user_gave(ssp_path):
 
 def test_the_errors_the_api_raises_are_importable():
     from impedance_cosim import Divergence, MasterError, SspError
-    from impedance_cosim.cosim.run_setup import MasterError as Original
-    from impedance_cosim.cosim.ssp import SspError as OriginalSsp
+    from impedance_cosim.cosim.master.setup import MasterError as Original
+    from impedance_cosim.cosim.ssp.read import SspError as OriginalSsp
 
     assert MasterError is Original and SspError is OriginalSsp and Divergence is not None
     assert {"MasterError", "SspError"} <= set(dir(ic))

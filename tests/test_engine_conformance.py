@@ -25,16 +25,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impedance_cosim.cosim.engines import (
+from impedance_cosim.cosim.engines.others import (
     AccumulatedTimes,
     nanosecond_times,
     run_in_ecospy,
     run_in_fmpy,
     run_in_libcosim,
 )
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import CONNECTIONS, SCENARIOS
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import CONNECTIONS, SCENARIOS
 from impedance_cosim.packaging.build import build_ssp
 
 H = 0.0025
@@ -192,7 +192,7 @@ def test_every_ssd_and_ssv_validates_against_the_ssp_schemas():
     from fmpy.ssp.ssd import validate_tree
     from lxml import etree
 
-    from impedance_cosim.cosim.system import source_files
+    from impedance_cosim.cosim.system.paper import source_files
 
     files = source_files()
     assert sorted(n for n in files if n.endswith(".ssd")) == [

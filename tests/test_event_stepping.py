@@ -1,5 +1,6 @@
-"""Event-exact stepping (cosim/events.py): the FMI 3.0 plant stopped at each contact switch inside
-the master's communication steps, each event handled in Event Mode, on the FMI 3.0 archive."""
+"""Event-exact stepping (cosim/master/events.py): the FMI 3.0 plant stopped at each contact switch
+inside the master's communication steps, each event handled in Event Mode, on the FMI 3.0
+archive."""
 
 from __future__ import annotations
 
@@ -11,9 +12,9 @@ import sys
 import numpy as np
 import pytest
 
-from impedance_cosim.cosim.events import EventExactMaster, EventInstance
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.events import EventExactMaster, EventInstance
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 

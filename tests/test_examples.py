@@ -16,7 +16,7 @@ import pytest
 from nbclient import NotebookClient
 from test_report import check_page
 
-from impedance_cosim.cosim.provenance import file_sha256
+from impedance_cosim.cosim.results.provenance import file_sha256
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "paper_scenario.ipynb"
 

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from impedance_cosim.cli import main
-from impedance_cosim.cosim.fmu import FmuInstance
-from impedance_cosim.cosim.master import Master, MasterError
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
@@ -202,7 +202,7 @@ def test_the_linearised_loop_steps_like_the_master(native_ssp, extrapolation, sc
     velocity's slope, the acceleration, depends on the torque the plant held)."""
     from controller_model.model import ControllerModel
     from impedance_cosim.apps import linearize as lin
-    from impedance_cosim.cosim.loop import wiring
+    from impedance_cosim.cosim.master.plain_loop import wiring
     from plant_model.model import PlantModel
 
     h, n = 1 / 800, 800  # 800 Hz: the true velocity extrapolated is stable from 663 Hz

@@ -20,10 +20,10 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3ScheduledExecution, FMU3Slave
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.results import read_csv
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.results.result import read_csv
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging import toolchains
 from impedance_cosim.packaging.build3 import CLOCKED_NAME
 from impedance_cosim.packaging.regression import REFERENCES, compare
@@ -375,7 +375,7 @@ def test_our_master_honours_the_clock(
     """Our master runs the clocked controller (ClockedInstance: a tick activation for every
     tick in each communication step): 8000 ticks over 20 s and the FMI 2.0 run bit for bit; at a
     1/200 s master step the clock still ticks 400 times per second (two per step)."""
-    from impedance_cosim.cosim import fmu3
+    from impedance_cosim.cosim.fmus import fmi3 as fmu3
 
     ticks: list[int] = []
     step = fmu3.ClockedInstance.step

@@ -23,7 +23,7 @@ from test_platforms import (  # the same tools and bounds as for FMI 2.0
     wine,  # noqa: F401  (a fixture run_command asks for)
 )
 
-from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging import toolchains
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")

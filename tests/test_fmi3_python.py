@@ -9,10 +9,10 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.cosim.fmu import FmuError
-from impedance_cosim.cosim.fmu3 import FmuInstance3
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.fmus.fmi2 import FmuError
+from impedance_cosim.cosim.fmus.fmi3 import FmuInstance3
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytest.importorskip("pythonfmu3")
 

@@ -15,7 +15,7 @@ import pytest
 from fmpy.validation import validate_fmu
 from fmpy_cli import fmpy_cli
 
-from impedance_cosim.cosim.fmu import FmuError, FmuInstance
+from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
 
 DT = 1 / 400
@@ -179,8 +179,8 @@ def test_process_survives_an_initialization_error(ssp_path):
     it is freed, and the process crashed at a later garbage collection: segfault before the fix)."""
     script = f"""
 import gc
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 system = read_ssp(r"{ssp_path}")
 for k in range(3):
     bad = Master(system, overrides={{"plant.x0": 5.0}}, stop_time=0.1).run()
@@ -188,7 +188,7 @@ for k in range(3):
     assert Master(system, stop_time=0.1).run().ok
     gc.collect()
 print("survived")
-from impedance_cosim.cosim.fmu import exit_process
+from impedance_cosim.cosim.fmus.fmi2 import exit_process
 exit_process(0)  # the libraries left loaded after fmi2Fatal: see exit_process
 """
     done = subprocess.run(

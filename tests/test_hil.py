@@ -21,9 +21,10 @@ from impedance_cosim.apps.hil import replacement_problems
 from impedance_cosim.apps.robot import Fault
 from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
-from impedance_cosim.cosim import realtime, results
-from impedance_cosim.cosim.master import RT_COLUMNS, Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master import realtime
+from impedance_cosim.cosim.master.master import RT_COLUMNS, Master
+from impedance_cosim.cosim.results import result as results
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 TOKEN = protocol.new_token()
 KEY = protocol.token_key(TOKEN)
@@ -287,8 +288,8 @@ def test_a_robot_that_never_starts_fails_the_initialization(ssp_path, bridge):
         port = s.getsockname()[1]  # free now, and nobody listens
     code = (
         "import sys, time\n"
-        "from impedance_cosim.cosim.master import Master\n"
-        "from impedance_cosim.cosim.ssp import read_ssp\n"
+        "from impedance_cosim.cosim.master.master import Master\n"
+        "from impedance_cosim.cosim.ssp.read import read_ssp\n"
         "start = time.perf_counter()\n"
         f"r = Master(read_ssp({str(ssp_path)!r}), stop_time=1.0, fmu_files={{'plant': "
         f"{str(bridge)!r}}}, overrides={{'plant.robot_port': {port}, "

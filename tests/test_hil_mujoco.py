@@ -14,9 +14,9 @@ from bridge_model import protocol
 from impedance_cosim.apps.robot_plant import plant_class
 from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
-from impedance_cosim.cosim import results
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.results import result as results
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 TOKEN = protocol.new_token()
 PATIENT = {"plant.timeout_s": 20.0, "plant.init_timeout_s": 60.0}  # a slow machine is no failure

@@ -76,8 +76,8 @@ VARIANT_RUN = """
 import sys
 import numpy as np
 import plant_model.model  # the host has our plant imported, like the CLI and sweep workers
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 system = read_ssp(sys.argv[1])
 original = Master(system, stop_time=0.5).run()

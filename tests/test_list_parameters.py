@@ -9,9 +9,9 @@ import sys
 import pytest
 
 from impedance_cosim.apps.parameters import parameter_lines
-from impedance_cosim.cosim.fmu_files import model_description
-from impedance_cosim.cosim.master import Master, MasterError
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.fmus.files import model_description
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 
 @pytest.fixture(scope="module")

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.loop import run_models
-from impedance_cosim.cosim.master import Master, MasterError
-from impedance_cosim.cosim.ssp import SspError, read_ssp
-from impedance_cosim.cosim.system import source_files
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.plain_loop import run_models
+from impedance_cosim.cosim.ssp.read import SspError, read_ssp
+from impedance_cosim.cosim.system.paper import source_files
 
 DT = 1 / 400
 
@@ -41,8 +41,8 @@ def paper_run(ssp_path):
 
 
 def test_ssp_sources_are_generated_from_the_system_definition():
-    """ssp/*.ssd/ssv are the committed output of impedance_cosim.cosim.system (regenerate with
-    `python -m impedance_cosim.cosim.system`)."""
+    """ssp/*.ssd/ssv are the committed output of impedance_cosim.cosim.system.paper (regenerate with
+    `python -m impedance_cosim.cosim.system.paper`)."""
     folder = Path(__file__).resolve().parent.parent / "ssp"
     for name, content in source_files().items():
         assert (folder / name).read_bytes() == content, name
@@ -264,7 +264,7 @@ def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
 ):
     """Master.run(progress=stream): plain lines in a log (no carriage return), a bar on a
     terminal; each names the parameter set and shows steps, simulated time and real-time factor."""
-    from impedance_cosim.cosim import master
+    from impedance_cosim.cosim.master import master
 
     if loop == "c" and master.fastloop.load() is None:
         pytest.skip("no C compiler for the compiled loop")

@@ -26,11 +26,11 @@ from fmpy.fmi2 import (
 from fmpy.simulation import Input
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.replay import cs_crossing_times, held_input, me_replay
-from impedance_cosim.cosim.results import read_csv
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.cosim.engines.replay import cs_crossing_times, held_input, me_replay
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.results.result import read_csv
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import CONNECTIONS
 from plant_model.model import PlantModel
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")

@@ -271,7 +271,7 @@ def test_default_experiment_runs_alone_as_pumaplants_reference(fmu_dir, tmp_path
 def test_state_restore_in_contact_is_bit_identical(fmu_dir):
     """Pushed into the wall (noisy encoders): step, save, step, restore, step again, also into a
     second instance through serialization: identical outputs."""
-    from impedance_cosim.cosim.fmu import FmuInstance
+    from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
 
     def started(name):
         fmu = FmuInstance(fmu_dir / "MujocoPlant.fmu", name)

@@ -16,11 +16,11 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.cosim.fmu import FmuError, FmuInstance
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.results import read_csv
-from impedance_cosim.cosim.ssp import read_ssp
-from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.results.result import read_csv
+from impedance_cosim.cosim.ssp.read import read_ssp
+from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging.regression import REFERENCES, compare
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")

@@ -19,7 +19,7 @@ import pytest
 
 from controller_model.model import INPUT_START, ControllerModel
 from controller_model.parameters import VELOCITY_SOURCE
-from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master.plain_loop import run_models
 from impedance_cosim.fmi.model import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]

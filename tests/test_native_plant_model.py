@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import DT, contact_torques
 
-from impedance_cosim.cosim.loop import run_models
+from impedance_cosim.cosim.master.plain_loop import run_models
 from impedance_cosim.fmi.model import ModelError
 from plant_model.model import PlantModel
 

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from test_master import modified  # an archive with members edited
 
-from impedance_cosim.cosim.engines import EngineError, nanosecond_times, run_in_libcosim
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.engines.others import EngineError, nanosecond_times, run_in_libcosim
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytest.importorskip("libcosimpy")
 

@@ -20,7 +20,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging import toolchains
 from impedance_cosim.packaging.build import FMUS, build_native_fmu
 

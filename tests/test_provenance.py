@@ -13,7 +13,7 @@ import numpy as np
 from fmpy.util import read_csv
 
 from impedance_cosim.cli import main
-from impedance_cosim.cosim.provenance import file_sha256
+from impedance_cosim.cosim.results.provenance import file_sha256
 
 
 def test_run_json_records_how_the_result_was_made(ssp_path, tmp_path):

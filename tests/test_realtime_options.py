@@ -9,10 +9,10 @@ import os
 import pytest
 
 from impedance_cosim.cli import main
-from impedance_cosim.cosim import realtime
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.realtime import RealtimeOptions
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master import realtime
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.realtime import RealtimeOptions
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 
 def test_pinning_is_applied_and_undone():

@@ -23,7 +23,7 @@ import pytest
 
 from impedance_cosim.apps import html_page, report
 from impedance_cosim.cli import main
-from impedance_cosim.cosim.provenance import file_sha256
+from impedance_cosim.cosim.results.provenance import file_sha256
 
 REQUIRE = os.environ.get("IMPCOSIM_REQUIRE_PLATFORMS") == "1"
 VOID = {"meta", "img", "br", "hr", "input", "link", "source", "wbr", "col", "area", "base"}

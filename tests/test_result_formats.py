@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.results import format_rows
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.results.result import format_rows
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 
 def repr_rows(data: np.ndarray) -> str:
@@ -54,7 +54,7 @@ def test_every_scenario_run_is_spelled_as_repr(native_ssp, algorithm: str) -> No
 
 
 def test_a_value_equal_to_the_placeholder_still_reads_as_repr() -> None:
-    from impedance_cosim.cosim import results
+    from impedance_cosim.cosim.results import result as results
 
     data = np.array([[1.5e-05, results._PLACE, 2e-07], [0.25, 1e-05, 3.0]])
     assert format_rows(data) == repr_rows(data)
@@ -62,7 +62,7 @@ def test_a_value_equal_to_the_placeholder_still_reads_as_repr() -> None:
 
 def test_each_model_description_is_parsed_once_per_run(native_ssp, monkeypatch) -> None:
     """Nothing computed twice: the master's checks and the FMU instances share one parse."""
-    from impedance_cosim.cosim import fmu_files
+    from impedance_cosim.cosim.fmus import files as fmu_files
 
     parsed: list[str] = []
     real = fmu_files.read_model_description

@@ -86,7 +86,7 @@ def test_an_interrupted_run_keeps_its_rows_as_partial_and_the_earlier_files(
     """Ctrl-C (a KeyboardInterrupt raised by a patched Master.run, no signal) as the Fig. 4 pair
     runs: exit 130; the main run's whole rows, its summary and figures 1-3 are kept as .partial,
     the earlier run's files are as they were."""
-    from impedance_cosim.cosim.master import Master
+    from impedance_cosim.cosim.master.master import Master
 
     out = tmp_path / "res"
     assert run(native_ssp, out) == 0

@@ -25,8 +25,8 @@ from bridge_model import protocol
 from bridge_model.model import BridgeModel
 from impedance_cosim.apps.robot import RobotServer
 from impedance_cosim.apps.robot_process import ROBOT_COMMAND, start_robot
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.fmi.model import ModelError
 from plant_model.model import PlantModel
 

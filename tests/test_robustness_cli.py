@@ -331,7 +331,7 @@ def test_a_second_run_into_a_busy_folder_is_refused(native_ssp, tmp_path):
 
 @pytest.mark.slow
 def test_two_builds_into_one_folder_at_once(tmp_path):
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     out = tmp_path / "fmus"
     for _ in range(2):
@@ -361,8 +361,8 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
     mid-run) stops the run after the block under way with RunInterrupted and every row kept."""
     import numpy as np
 
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.ssp.read import read_ssp
     from impedance_cosim.util.interrupt import RunInterrupted
 
     system = read_ssp(native_ssp)
@@ -404,8 +404,8 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
 )
 def test_master_refuses_bad_times(native_ssp, kwargs, message):
     """The API too: a zero step is refused, not replaced by the default."""
-    from impedance_cosim.cosim.master import Master, MasterError
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master, MasterError
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     with pytest.raises(MasterError, match=re.escape(message)):
         Master(read_ssp(native_ssp), **kwargs)

@@ -155,7 +155,7 @@ _TO_CSV = """
 import sys
 import numpy as np
 from impedance_cosim.api import Result
-from impedance_cosim.cosim.results import RunResult
+from impedance_cosim.cosim.results.result import RunResult
 data = np.random.default_rng(1).random((20000, 12))
 run = RunResult(["time", *[f"s{i}" for i in range(11)]], data, 0.0025, "jacobi", "observer")
 try:
@@ -421,7 +421,7 @@ def test_a_csv_whose_rename_fails_is_kept_as_partial(tmp_path, monkeypatch):
 
     import numpy as np
 
-    from impedance_cosim.cosim.results import CsvStream
+    from impedance_cosim.cosim.results.result import CsvStream
     from impedance_cosim.util import atomic
 
     real = atomic.replace

@@ -450,7 +450,7 @@ def test_exit_process_keeps_python_exit_work(leaked):
     its output, with the exit status it chose."""
     code = (
         "import atexit, sys\n"
-        "from impedance_cosim.cosim import fmu\n"
+        "from impedance_cosim.cosim.fmus import fmi2 as fmu\n"
         "atexit.register(lambda: print('atexit ran'))\n"
         f"if {leaked}: fmu._leaked_libraries.append('controller')\n"
         "sys.stdout.write('buffered, no newline')\n"

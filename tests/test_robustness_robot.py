@@ -21,8 +21,8 @@ import pytest
 from bridge_model import protocol
 from impedance_cosim.apps.robot import RobotServer
 from impedance_cosim.apps.robot_process import ROBOT_COMMAND, start_robot, stop_robot
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 from plant_model.model import PlantModel
 
 TOKEN = protocol.new_token()
@@ -381,8 +381,8 @@ def test_a_bridge_with_another_token_fails_initialization(ssp_path, fmu_dir, rob
     robot drops every datagram of a bridge with another token; the bridge says so."""
     port = robot()
     code = (
-        "from impedance_cosim.cosim.master import Master\n"
-        "from impedance_cosim.cosim.ssp import read_ssp\n"
+        "from impedance_cosim.cosim.master.master import Master\n"
+        "from impedance_cosim.cosim.ssp.read import read_ssp\n"
         f"r = Master(read_ssp({str(ssp_path)!r}), stop_time=1.0, fmu_files={{'plant': "
         f"{str(fmu_dir / 'BridgePlant.fmu')!r}}}, overrides={{'plant.robot_port': {port}, "
         f"'plant.robot_token': {protocol.new_token()!r}, 'plant.init_timeout_s': 0.3}}).run()\n"

@@ -647,7 +647,7 @@ def test_the_test_session_leaves_without_the_fmu_destructors(tmp_path, outcome):
     as the command does: before, a suite that passed could die at exit with SIGABRT."""
     test = tmp_path / "test_one.py"
     test.write_text(
-        "from impedance_cosim.cosim import fmu\n\n\ndef test_one():\n"
+        "from impedance_cosim.cosim.fmus import fmi2 as fmu\n\n\ndef test_one():\n"
         f"    fmu._leaked_libraries.append('x')\n    assert {outcome == 'passed'}\n"
     )
     tests = Path(__file__).parent

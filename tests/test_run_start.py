@@ -9,7 +9,7 @@ from pathlib import Path
 
 from fmpy import platform
 
-from impedance_cosim.cosim.fmu_files import extractions
+from impedance_cosim.cosim.fmus.files import extractions
 
 
 def test_an_fmu_is_extracted_with_only_what_running_it_needs(native_dir: Path) -> None:

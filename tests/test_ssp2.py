@@ -15,12 +15,12 @@ from pathlib import Path
 import pytest
 import xmlschema
 
-from impedance_cosim.cosim import fmu3
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.results import write_csv
-from impedance_cosim.cosim.ssd2 import SRMD, schema_dir
-from impedance_cosim.cosim.ssp import SspError, read_ssp
-from impedance_cosim.cosim.system import SCENARIOS, ssd_name
+from impedance_cosim.cosim.fmus import fmi3 as fmu3
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.results.result import write_csv
+from impedance_cosim.cosim.ssp.read import SspError, read_ssp
+from impedance_cosim.cosim.ssp.ssp2 import SRMD, schema_dir
+from impedance_cosim.cosim.system.paper import SCENARIOS, ssd_name
 
 REPO = Path(__file__).resolve().parents[1]
 SSD = "SystemStructure.ssd"
@@ -233,7 +233,7 @@ def test_the_cli_exits_2_with_one_line_on_a_broken_2_0_ssd(editions, tmp_path, c
 def test_an_implementation_the_master_cannot_honour_is_refused(editions, tmp_path, old, new,
                                                                message):  # fmt: skip
     """SSP 2.0's implementation attribute: the FMU must have it and our master must use it."""
-    from impedance_cosim.cosim.run_setup import MasterError
+    from impedance_cosim.cosim.master.setup import MasterError
 
     ssp = editions[1]
     for name in [SSD, *(ssd_name(s) for s in SCENARIOS if ssd_name(s) != SSD)]:
@@ -254,7 +254,8 @@ def test_fuzz_mutated_2_0_archives_end_in_a_description_or_an_ssp_error(
 
     from test_ssp_reader import _AnythingGoes, _mutant, members
 
-    from impedance_cosim.cosim import ssd, ssd2
+    from impedance_cosim.cosim.ssp import ssp1 as ssd
+    from impedance_cosim.cosim.ssp import ssp2 as ssd2
 
     if schema == "without schema":
         monkeypatch.setattr(ssd, "_schema", lambda name: _AnythingGoes())
@@ -283,7 +284,7 @@ def test_a_clock_connector_of_another_interval_variability_than_the_fmus_is_refu
 ):
     """A Clock connector (every end of its connections alike) that says `tunable` where the
     FMU's clock is `fixed`: the master names the connector and both values."""
-    from impedance_cosim.cosim.run_setup import MasterError
+    from impedance_cosim.cosim.master.setup import MasterError
 
     out = tmp_path / "tunable.ssp"
     fixed, tunable = b'intervalVariability="fixed"', b'intervalVariability="tunable"'

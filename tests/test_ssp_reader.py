@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.cosim import ssd
-from impedance_cosim.cosim.master import Master, MasterError
-from impedance_cosim.cosim.ssp import Limits, SspError, SystemDescription, read_ssp
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.ssp import ssp1 as ssd
+from impedance_cosim.cosim.ssp.read import Limits, SspError, SystemDescription, read_ssp
 
 SSD = "SystemStructure.ssd"
 PLANT = "resources/PumaPlant.fmu"

@@ -16,7 +16,7 @@ import pytest
 from impedance_cosim.apps import fig4, linearize
 from impedance_cosim.apps.stability import bisection as stability
 from impedance_cosim.apps.stability.command import read_csv
-from impedance_cosim.cosim.loop import loop_step
+from impedance_cosim.cosim.master.plain_loop import loop_step
 from impedance_cosim.physics.ode import integrate
 
 REPO = Path(__file__).resolve().parent.parent
@@ -163,8 +163,8 @@ def test_loop_map_state_is_complete(reference, algorithm):
 def test_linear_prediction_brackets_the_simulated_boundary(reference, native_ssp):
     """Sample-and-hold, true velocity: the linearised contact point predicts the critical rate,
     and the native co-simulation diverges 4 % below it and stays bounded 4 % above it."""
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     pred = linearize.critical_rate(
         lambda r: linearize.loop_radius(r, "gauss-seidel", "measured", reference=reference)[0],
@@ -289,7 +289,7 @@ def test_observer_pole_of_each_discretization(form, pole, kh):
 
 def test_a_parameter_the_system_lacks_is_an_error_before_any_run(monkeypatch, native_ssp):
     """Not a bracket of "unstable" runs: the study refuses to start."""
-    from impedance_cosim.cosim.master import MasterError
+    from impedance_cosim.cosim.master.master import MasterError
 
     case = stability.Case("rate", "observer", "gauss-seidel", "ideal")
     monkeypatch.setitem(stability.SENSORS, "ideal", {"plant.no_such_thing": 1.0})

@@ -10,8 +10,8 @@ import pytest
 
 from impedance_cosim.apps import sweep
 from impedance_cosim.cli import main
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 
 @pytest.fixture(scope="module")
@@ -210,7 +210,7 @@ def test_each_table_records_how_it_was_made(native_ssp, tmp_path):
     archive's sha256 among it) and its rows by status."""
     import json
 
-    from impedance_cosim.cosim.provenance import file_sha256
+    from impedance_cosim.cosim.results.provenance import file_sha256
 
     out = tmp_path / "s"
     args = ["sweep", "--serial", "--no-plots", "--no-report", "--no-progress", "--ssp",

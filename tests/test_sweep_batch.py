@@ -10,9 +10,9 @@ import pytest
 
 from impedance_cosim.apps import sweep
 from impedance_cosim.apps.sweep import execute as sweep_batch
-from impedance_cosim.cosim.fmu_pool import InstancePool
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.ssp import read_ssp
+from impedance_cosim.cosim.fmus.pool import InstancePool
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.ssp.read import read_ssp
 
 RUNS = [  # one after another on the same instances: each must equal a run on new instances
     {"overrides": {"plant.q_noise": 1e-4, "plant.noise_seed": 3}},

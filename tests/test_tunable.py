@@ -11,7 +11,7 @@ import pytest
 from fmpy import read_model_description
 
 from controller_model.model import INPUT_START
-from impedance_cosim.cosim.fmu import FmuError, FmuInstance
+from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 
 TS = 1 / 400
 CHANGE_AT = 40  # the set happens after this many steps

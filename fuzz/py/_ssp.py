@@ -12,8 +12,9 @@ from pathlib import Path
 
 import _common
 
-from impedance_cosim.cosim import ssd, ssd2
-from impedance_cosim.cosim.ssp import SspError, read_ssp
+from impedance_cosim.cosim.ssp import ssp1 as ssd
+from impedance_cosim.cosim.ssp import ssp2 as ssd2
+from impedance_cosim.cosim.ssp.read import SspError, read_ssp
 
 
 class _AnythingGoes:

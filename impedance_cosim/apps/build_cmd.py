@@ -32,8 +32,11 @@ def stale(target: Path) -> bool:
     if not target.is_file():
         return True
     core = REPO / "impedance_cosim"
-    sources = [core / "packaging" / "build.py", core / "cosim" / "system.py"]
-    sources += [core / "packaging" / "build_ssp2.py", core / "cosim" / "system2.py"]  # SSP 2.0
+    sources = [core / "packaging" / "build.py", core / "cosim" / "system" / "paper.py"]
+    sources += [
+        core / "packaging" / "build_ssp2.py",
+        core / "cosim" / "system" / "ssp2.py",
+    ]  # SSP 2.0
     sources += [core / item for item in FMU_CORE]
     sources += [REPO / spec.package for spec in FMUS.values()] + [REPO / "ssp"]
     files = [f for s in sources for f in ([s] if s.is_file() else s.rglob("*"))]

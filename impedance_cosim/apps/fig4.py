@@ -98,7 +98,7 @@ def run_condition(
     """One run (native master) of a condition with a velocity source: the table row and the
     signals the figure needs (time, true and fed-back x-velocity). reference: the x-velocity of
     a stable run (the oscillation is the deviation from it)."""
-    from impedance_cosim.cosim.master import Master
+    from impedance_cosim.cosim.master.master import Master
 
     overrides = {**condition.overrides, "controller.sample_period": 1.0 / rate}
     r = Master(system, parameter_set=source, algorithm=condition.algorithm, overrides=overrides,
@@ -117,7 +117,7 @@ def run_condition(
 
 def run_all(ssp: str | Path, conditions=CONDITIONS) -> list[dict[str, Any]]:
     """Every condition x velocity source, in order."""
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     system = read_ssp(ssp)
     runs = []

@@ -37,8 +37,8 @@ def replacement_problems(
 ) -> list[str]:
     """Every difference between what the system needs of `component` and the FMU file (empty
     when it fits); see module docstring."""
-    from impedance_cosim.cosim.fmu_files import FmuArchiveError, model_description
-    from impedance_cosim.cosim.run_setup import connector_problems
+    from impedance_cosim.cosim.fmus.files import FmuArchiveError, model_description
+    from impedance_cosim.cosim.master.setup import connector_problems
 
     comp = system.component(component)
     fmu = Path(fmu)
@@ -159,7 +159,7 @@ def _session_key(token_file: str | None) -> bytes:
 def _cmd_swap(args: argparse.Namespace) -> int:
     from impedance_cosim.apps import options, run
     from impedance_cosim.apps.build_cmd import ensure_built
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     replace = {}
     for item in args.replace:  # cheap checks first, before any build
@@ -228,7 +228,7 @@ def _check_robot_given(replace: Mapping[str, Path], overrides: Mapping[str, str]
 def _check_archives(replace: Mapping[str, Path]) -> None:
     """Each replacement FMU that exists is a safe archive (one line naming the file and the
     member, exit 2 otherwise), before anything is built, written or run."""
-    from impedance_cosim.cosim.fmu_files import check_fmu_archive
+    from impedance_cosim.cosim.fmus.files import check_fmu_archive
 
     for path in replace.values():
         if path.is_file():
@@ -236,7 +236,7 @@ def _check_archives(replace: Mapping[str, Path]) -> None:
 
 
 def _has_parameter(fmu: Path, name: str) -> bool:
-    from impedance_cosim.cosim.fmu_files import model_description
+    from impedance_cosim.cosim.fmus.files import model_description
 
     md = model_description(fmu)
     return any(v.name == name and v.causality == "parameter" for v in md.modelVariables)

@@ -4,15 +4,16 @@ The state at a sample instant t_k (before the controller samples) is
 x = (q, qd) of the plant and (yhat, q_prev, tau_prev, f_prev) of the controller: 18 numbers.
 Under Jacobi the torque the plant receives over [t_k, t_k+1] is tau_prev (one sample late);
 under Gauss-Seidel it is the one computed at t_k, so the same 18 numbers are a complete state
-for both timings. One sample of the loop (impedance_cosim.cosim.loop.loop_step on the plain Python
-PlantModel and ControllerModel, ideal encoders) maps x_k to x_k+1; its Jacobian, by central
-differences, is the linearised sampled-data loop at that operating point. Its spectral radius
-above 1 means the loop is locally unstable there.
+for both timings. One sample of the loop (impedance_cosim.cosim.master.plain_loop.loop_step on the
+plain Python PlantModel and ControllerModel, ideal encoders) maps x_k to x_k+1; its Jacobian, by
+central differences, is the linearised sampled-data loop at that operating point. Its spectral
+radius above 1 means the loop is locally unstable there.
 
-Algorithm "jacobi-linear": Jacobi with the master's input extrapolation (cosim/extrapolation.py):
-the controller samples y(t_k) + h dy/dt(t_k), the plant's output derivatives taken with the torque
-it held over the last sample (as the native plant reports them), so that torque joins the state
-(21 numbers); dy/dt by a central difference of the outputs along the plant's own state derivative.
+Algorithm "jacobi-linear": Jacobi with the master's input extrapolation
+(cosim/master/extrapolation.py): the controller samples y(t_k) + h dy/dt(t_k), the plant's output
+derivatives taken with the torque it held over the last sample (as the native plant reports them),
+so that torque joins the state (21 numbers); dy/dt by a central difference of the outputs along the
+plant's own state derivative.
 
 The trajectory is time-varying (the virtual ellipse moves): the Jacobian at a point is the frozen
 map of that sample, and the points used are one in free motion and one in settled contact.
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.loop import loop_step, run_models, wiring
+from impedance_cosim.cosim.master.plain_loop import loop_step, run_models, wiring
 from plant_model.model import PlantModel
 
 # Where the loop is linearised: a point in free motion and one in settled contact (s; the paper

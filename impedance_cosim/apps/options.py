@@ -135,7 +135,7 @@ def add_run_options(p: argparse.ArgumentParser, out: str = "results") -> None:
                         "plant.q_noise=1e-4 (repeatable)")  # fmt: skip
     p.add_argument("--realtime", action="store_true",
                    help="pace the steps to the wall clock; per-step timing recorded")  # fmt: skip
-    from impedance_cosim.cosim.realtime import add_options
+    from impedance_cosim.cosim.master.realtime import add_options
 
     add_options(p)
     p.add_argument("--out", default=out, help=f"output folder (default {out}/)")

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from impedance_cosim.apps.analysis import TARGET_FORCE
-from impedance_cosim.cosim.system import PAPER_PARAMETERS
+from impedance_cosim.cosim.system.paper import PAPER_PARAMETERS
 
 Run = Mapping[str, Any]
 

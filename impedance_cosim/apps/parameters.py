@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import re
 
-from impedance_cosim.cosim.fmu_files import model_description
-from impedance_cosim.cosim.master import MasterError
-from impedance_cosim.cosim.ssp import SystemDescription
+from impedance_cosim.cosim.fmus.files import model_description
+from impedance_cosim.cosim.master.master import MasterError
+from impedance_cosim.cosim.ssp.read import SystemDescription
 
 
 def parameter_lines(system: SystemDescription, scenario: str | None) -> list[str]:

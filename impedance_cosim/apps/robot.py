@@ -381,7 +381,7 @@ def _parameter_problem(kind: str, x: float) -> str:
 
 
 def _convert(kind: str, value: Any, name: str) -> Any:
-    from impedance_cosim.cosim.fmu import fmi_value
+    from impedance_cosim.cosim.fmus.fmi2 import fmi_value
 
     if kind in ("Integer", "Boolean") and isinstance(value, float):
         value = int(value)

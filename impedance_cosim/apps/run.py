@@ -31,13 +31,13 @@ from impedance_cosim.apps.options import (
     parse_overrides,
     prepare_out,
 )
-from impedance_cosim.cosim import provenance
+from impedance_cosim.cosim.results import provenance
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Check everything (options, archive, every scenario to run), then create --out, lock it
     and run: bad input writes nothing."""
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
     from impedance_cosim.util.atomic import FolderLock
 
     overrides = parse_overrides(args.set or [])
@@ -64,9 +64,9 @@ def _master(
     args: argparse.Namespace, system, overrides: dict, scenario: str | None, algorithm: str | None
 ):
     """The master of one run of the command (MasterError for anything it refuses)."""
-    from impedance_cosim.cosim.events import EventExactMaster
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.realtime import realtime_setting
+    from impedance_cosim.cosim.master.events import EventExactMaster
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.realtime import realtime_setting
 
     cls = EventExactMaster if getattr(args, "event_exact", False) else Master
     return cls(
@@ -256,7 +256,7 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
     sample-and-hold also the pair under one sample of delay, the paper's Fig. 4). Exit status
     (results.exit_status) from the runs asked for: 1 failed, 3 diverged, 0 ok."""
     from impedance_cosim.apps import analysis
-    from impedance_cosim.cosim.results import exit_status
+    from impedance_cosim.cosim.results.result import exit_status
     from impedance_cosim.util.atomic import atomic_write
 
     main = run(args.scenario)
@@ -266,7 +266,7 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
     runs[-1]["summary"] = values
     print(analysis.format_summary(values))
     if "realtime" in main.info:
-        from impedance_cosim.cosim.realtime import format_realtime
+        from impedance_cosim.cosim.master.realtime import format_realtime
 
         values["realtime"] = main.info["realtime"]
         print(format_realtime(main.info["realtime"]))
@@ -344,12 +344,12 @@ def remove_stale(args: argparse.Namespace, out: Path, system, owned: list[Path])
 
 def results_stream(path: Path, fmt: str, every: int, master):
     """The sink that writes a run's rows (every `every`-th): a CSV as it runs, or a result file
-    (.mat, cosim/result_mat.py) with the variables' descriptions and the run's parameters."""
-    from impedance_cosim.cosim.results import CsvStream
+    (.mat, cosim/results/mat.py) with the variables' descriptions and the run's parameters."""
+    from impedance_cosim.cosim.results.result import CsvStream
 
     if fmt == "csv":
         return CsvStream(path, every=every)
-    from impedance_cosim.cosim.result_mat import MatStream
+    from impedance_cosim.cosim.results.mat import MatStream
 
     units = provenance.signal_units(master, [])
     texts = {}

@@ -314,7 +314,7 @@ def build_ssp(
     its SSD as SystemStructure.ssd (for engines that read only the default SSD)."""
     from fmpy.ssp.ssd import read_ssd
 
-    from impedance_cosim.cosim.system import COMPONENTS, SCENARIOS, ssd_name, ssv_name
+    from impedance_cosim.cosim.system.paper import COMPONENTS, SCENARIOS, ssd_name, ssv_name
 
     out_dir = Path(out_dir)
     source = REPO / "ssp"

@@ -108,7 +108,7 @@ def _build_into(
     for k in native:
         add(build_native_fmu(FMUS[k], Path(out_dir) / "native"))
     if everything:
-        from impedance_cosim.cosim.system import SCENARIOS
+        from impedance_cosim.cosim.system.paper import SCENARIOS
 
         flavours = [("PaperScenario", None)]
         if native:

@@ -1,5 +1,5 @@
 """Build the SSP 2.0 edition of the FMI 3.0 system archive, fmus/PaperScenario-fmi3-ssp2.ssp
-(cosim/system2.py writes its SSDs and SSVs), and validate it against the SSP 2.0 XSDs that
+(cosim/system/ssp2.py writes its SSDs and SSVs), and validate it against the SSP 2.0 XSDs that
 pyssp-standard ships (and its SRMD meta data against SSP Traceability's SRMD schema).
 The SSP 1.0 archives are left as they are, for engines that read only 1.0."""
 
@@ -19,7 +19,7 @@ NAME = "PaperScenario-fmi3-ssp2"
 def build_ssp2(out_dir: Path = DEFAULT_OUT, fmu_dir: Path | None = None) -> Path:
     """Pack the 2.0 SSDs and SSVs with the FMI 3.0 FMUs of fmu_dir (default out_dir/fmi3) into
     out_dir/PaperScenario-fmi3-ssp2.ssp; refused (ValueError) if it does not validate."""
-    from impedance_cosim.cosim.system2 import COMPONENTS2, archive_files
+    from impedance_cosim.cosim.system.ssp2 import COMPONENTS2, archive_files
 
     out_dir = Path(out_dir)
     fmu_dir = Path(fmu_dir or out_dir / "fmi3")
@@ -46,7 +46,7 @@ def build_ssp2(out_dir: Path = DEFAULT_OUT, fmu_dir: Path | None = None) -> Path
 def _srmd_schema() -> Any:
     import xmlschema
 
-    from impedance_cosim.cosim.ssd2 import schema_dir
+    from impedance_cosim.cosim.ssp.ssp2 import schema_dir
 
     return xmlschema.XMLSchema11(str(schema_dir().parent / "SRMD11.xsd"))
 
@@ -56,7 +56,7 @@ def validation_problems(archive: Path) -> list[str]:
     against SRMD11.xsd: one line per problem (member, line, message); [] if all validate."""
     from lxml import etree
 
-    from impedance_cosim.cosim.ssd2 import SRMD, schema
+    from impedance_cosim.cosim.ssp.ssp2 import SRMD, schema
 
     problems = []
     with zipfile.ZipFile(archive) as z:

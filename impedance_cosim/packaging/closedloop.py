@@ -18,7 +18,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.system import CONNECTIONS, SCENARIO_DESCRIPTIONS, SCENARIOS
+from impedance_cosim.cosim.system.paper import CONNECTIONS, SCENARIO_DESCRIPTIONS, SCENARIOS
 from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.fmi.variables import ModelExchange, Variable
 from impedance_cosim.fmi.variables3 import c_config3, model_description3

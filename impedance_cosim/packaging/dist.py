@@ -57,7 +57,7 @@ def expected_members() -> list[str]:
     names = [f"{FMUS[k].model_name}.fmu" for k in FMUS]
     native = [k for k in FMUS if (NATIVE / k / "model.c").is_file()]
     names += [f"native/{FMUS[k].model_name}.fmu" for k in native]
-    from impedance_cosim.cosim.system import SCENARIOS
+    from impedance_cosim.cosim.system.paper import SCENARIOS
 
     systems = [f"{base}{s}.ssp" for base in ("PaperScenario", "PaperScenario-native")
                for s in ("", *(f"-{name}" for name in SCENARIOS))]  # fmt: skip

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.loop import output_names, run_models
-from impedance_cosim.cosim.results import read_csv, write_csv
+from impedance_cosim.cosim.master.plain_loop import output_names, run_models
+from impedance_cosim.cosim.results.result import read_csv, write_csv
 from impedance_cosim.packaging.build import REPO
 from plant_model.model import PlantModel
 

@@ -17,7 +17,7 @@ REQUIRED = ("PaperScenario.ssp", "PaperScenario-native.ssp", "native/PumaPlant.f
 # and the whole build code); the commands (apps) are not in the FMUs.
 SOURCES = (
     *(f"impedance_cosim/{name}" for name in ("__init__.py", "version.py", "physics", "fmi")),
-    *(f"impedance_cosim/cosim/{name}" for name in ("system.py", "system2.py")),
+    "impedance_cosim/cosim/system",
     "impedance_cosim/packaging",
     *("plant_model", "controller_model", "bridge_model", "native", "ssp"),
 )

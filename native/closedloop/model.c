@@ -1,6 +1,6 @@
 /* The paper's closed loop as one co-simulation FMU: the controller's and the plant's model code
  * (parts.h), stepped as our master's Gauss-Seidel loop steps their two FMUs
- * (impedance_cosim/cosim/master.py, native/master/loop.c): per step from t, the controller takes
+ * (impedance_cosim/cosim/master/master.py, native/master/loop.c): per step from t, the controller takes
  * the plant's outputs at t (its sample at t), then the plant integrates over the step with the
  * controller's torque held (the paper's sample-and-hold). Initialization follows the master's:
  * the plant first (its outputs depend on no input), the controller from the plant's outputs, the

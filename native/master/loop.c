@@ -1,5 +1,5 @@
 /* The master's stepping loop in C: the same Gauss-Seidel / Jacobi steps as the Python loop in
- * impedance_cosim/cosim/master.py, called through ctypes with the FMUs' own fmi2SetReal/fmi2DoStep/
+ * impedance_cosim/cosim/master/master.py, called through ctypes with the FMUs' own fmi2SetReal/fmi2DoStep/
  * fmi2GetReal function pointers (FMI 3.0 co-simulation: fmi3SetFloat64/fmi3DoStep/
  * fmi3GetFloat64), so a step costs the FMUs' time plus well under a microsecond.
  *
@@ -7,7 +7,7 @@
  * order (component k's outputs at columns out_col .. out_col + n_out - 1). Row `first` must be
  * filled by the caller; the loop fills rows first+1 .. first+n_steps.
  *
- * Input extrapolation (Jacobi only; impedance_cosim/cosim/extrapolation.py): with `rates` not
+ * Input extrapolation (Jacobi only; impedance_cosim/cosim/master/extrapolation.py): with `rates` not
  * NULL (one per column, the time derivatives of the outputs at the row before the step), each
  * input is row[col] + h * rates[col]; after each step the components with n_rate > 0 refresh
  * their columns of `rates` (fmi2GetRealOutputDerivatives / fmi3GetOutputDerivatives, order 1).

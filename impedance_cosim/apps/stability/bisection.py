@@ -231,8 +231,8 @@ def max_runs(quantity: str) -> int:
 def check_cases(todo: list[Case], ssp: Path, options: dict[str, Any]) -> None:
     """Configure (not run) a Master for both ends of every case, so that a parameter the system
     lacks is one clear error now, not a bracket of "unstable" runs."""
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     system = read_ssp(ssp)
     for case in todo:

@@ -109,7 +109,7 @@ def _check(args: argparse.Namespace) -> Path:
 def plans(args: argparse.Namespace, ssp: Path) -> dict[str, dict[str, Any]]:
     """What each part's results depend on (checked on --resume)."""
     from impedance_cosim.apps import fig4
-    from impedance_cosim.cosim.provenance import file_sha256
+    from impedance_cosim.cosim.results.provenance import file_sha256
 
     def selected(name: str, allowed) -> list[str]:
         return list(getattr(args, name) or allowed)

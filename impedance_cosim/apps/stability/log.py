@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from impedance_cosim.apps.stability.bisection import StabilityError
-from impedance_cosim.cosim import provenance
+from impedance_cosim.cosim.results import provenance
 
 FORMAT = "impedance-cosim stability log 1"
 RECORD = "stability.run.json"

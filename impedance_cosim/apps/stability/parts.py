@@ -175,7 +175,7 @@ def fig4_part(args: argparse.Namespace, ssp: Path, log: PartLog) -> tuple[list[d
     reference of the difference's run)."""
     from impedance_cosim.apps import fig4
     from impedance_cosim.apps import linearize as lin
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     conditions = [c for c in fig4.CONDITIONS if not args.condition or c.name in args.condition]
     if conditions[0] != fig4.CONDITIONS[0]:

@@ -33,8 +33,8 @@ from impedance_cosim.apps.sweep.plan import (
 from impedance_cosim.apps.sweep.study import STUDY, run_study
 from impedance_cosim.apps.sweep.table import open_table
 from impedance_cosim.apps.sweep.worker import STOP, RunInterruptedError
-from impedance_cosim.cosim import provenance
-from impedance_cosim.cosim.master import ALGORITHMS
+from impedance_cosim.cosim.master.master import ALGORITHMS
+from impedance_cosim.cosim.results import provenance
 
 
 def add_parser(sub) -> None:
@@ -275,7 +275,7 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
         check_scheduler(args.scheduler, args.connect_timeout)
     ssp = Path(args.ssp) if args.ssp else None
     if args.list_parameters:
-        from impedance_cosim.cosim.ssp import read_ssp
+        from impedance_cosim.cosim.ssp.read import read_ssp
 
         for name, text in known_parameters(read_ssp(ssp or default_ssp())).items():
             print(f"{name:28} {text}")

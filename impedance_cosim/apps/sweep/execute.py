@@ -21,7 +21,7 @@ from typing import Any
 from impedance_cosim.apps.sweep.metrics import METRICS
 from impedance_cosim.apps.sweep.plan import Plan, archive_payload, master_arguments
 from impedance_cosim.apps.sweep.worker import RunInterruptedError, run_batch, run_point
-from impedance_cosim.cosim.fmu_pool import InstancePool
+from impedance_cosim.cosim.fmus.pool import InstancePool
 from impedance_cosim.util.progress import Progress
 
 TARGET_S = 0.3  # aimed wall time of one task

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.cosim.master import RunResult
+from impedance_cosim.cosim.master.master import RunResult
 
 METRICS = (
     "t_end_s",

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from impedance_cosim.apps.options import FMUS_DIR, PACKAGED_FMUS, REPO  # noqa: F401 (sweep's)
-from impedance_cosim.cosim.master import ALGORITHMS, Master, MasterError
+from impedance_cosim.cosim.master.master import ALGORITHMS, Master, MasterError
 
 DEFAULT_SSP = FMUS_DIR / "PaperScenario-native.ssp"
 
@@ -285,7 +285,7 @@ def plan_sweep(
     system=None,
 ) -> Plan:
     """Parse and check a sweep (grid items "name=values"); SweepError before any work starts."""
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     ssp = Path(ssp) if ssp else DEFAULT_SSP
     if not grid:

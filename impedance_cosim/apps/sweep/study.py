@@ -93,7 +93,7 @@ def run_study(
     its .png files (--no-plots: none, so no serial tail of drawing); with resume, the runs
     already in the tables are not run again; the tables opened are appended to `tables` (to say
     how far an interrupted study got)."""
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     system = read_ssp(ssp or DEFAULT_SSP)
     plans = {

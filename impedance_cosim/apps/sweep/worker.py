@@ -17,8 +17,8 @@ from typing import Any
 
 from impedance_cosim.apps.sweep.metrics import METRICS, run_metrics
 from impedance_cosim.apps.sweep.plan import master_arguments
-from impedance_cosim.cosim.fmu_pool import InstancePool
-from impedance_cosim.cosim.master import Master
+from impedance_cosim.cosim.fmus.pool import InstancePool
+from impedance_cosim.cosim.master.master import Master
 
 POOL = InstancePool()  # per worker process: FMU instances reused across runs (run_batch)
 _SYSTEMS: dict[str, Any] = {}  # per process: SSP digest -> SystemDescription (FMUs extracted once)
@@ -29,7 +29,7 @@ def _system(payload: bytes | str, digest: str):
     digest), read and warmed up once per process (prepare_worker)."""
     system = _SYSTEMS.get(digest)
     if system is None:
-        from impedance_cosim.cosim.ssp import read_ssp
+        from impedance_cosim.cosim.ssp.read import read_ssp
 
         data = payload if isinstance(payload, bytes) else Path(payload).read_bytes()
         if hashlib.sha256(data).hexdigest() != digest:

@@ -18,8 +18,19 @@ import weakref
 import zipfile
 from pathlib import Path
 
-from impedance_cosim.cosim import ssd2
-from impedance_cosim.cosim.ssd import (
+from impedance_cosim.cosim.ssp import ssp2 as ssd2
+from impedance_cosim.cosim.ssp.archive import (
+    DEFAULT_LIMITS,
+    NS,
+    ArchiveError,
+    Limits,
+    SspError,
+    check_archive,
+    checked,
+    extract,
+    resolve_source,
+)
+from impedance_cosim.cosim.ssp.ssp1 import (
     Component,
     Connector,
     Parameter,
@@ -33,17 +44,6 @@ from impedance_cosim.cosim.ssd import (
     parse_xml,
     required,
     units,
-)
-from impedance_cosim.cosim.ssp_archive import (
-    DEFAULT_LIMITS,
-    NS,
-    ArchiveError,
-    Limits,
-    SspError,
-    check_archive,
-    checked,
-    extract,
-    resolve_source,
 )
 
 __all__ = ["Component", "Connector", "Limits", "Parameter", "SspError", "SystemDescription"]

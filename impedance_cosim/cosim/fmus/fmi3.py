@@ -11,7 +11,7 @@ from typing import Any
 
 from fmpy.fmi3 import FMU3ScheduledExecution, FMU3Slave, fmi3LogMessageCallback
 
-from impedance_cosim.cosim.fmu import STATUS, FmuError, FmuInstance
+from impedance_cosim.cosim.fmus.fmi2 import STATUS, FmuError, FmuInstance
 
 # FMI 3.0 type names as the FMI 2.0 / SSP 1.0 types the rest of the code knows them by
 SSP_TYPES = {"Float64": "Real", "Float32": "Real", "Int32": "Integer", "Int64": "Integer"}
@@ -29,7 +29,7 @@ def is_fmi3(description: Any) -> bool:
 
 def open_fmu(fmu: str | Path, instance_name: str, logging_on: bool = True) -> FmuInstance:
     """An instantiated co-simulation FMU of either standard (FmuInstance or FmuInstance3)."""
-    from impedance_cosim.cosim.fmu_files import model_description
+    from impedance_cosim.cosim.fmus.files import model_description
 
     try:  # checked before fmpy reads a member; parsed once per file version
         md = model_description(Path(fmu).resolve())

@@ -27,7 +27,7 @@ __all__ = ["DEFAULT_LIMITS", "ArchiveError", "Limits", "SspError", "check_archiv
 __all__ += ["check_members", "checked", "declared_members", "extract", "open_zip", "read_member"]
 __all__ += ["resolve_source", "unpack"]
 
-# The SSP 1.0 namespaces (the reader's and the writer's, cosim/system.py) and our annotation
+# The SSP 1.0 namespaces (the reader's and the writer's, cosim/system/paper.py) and our annotation
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",

@@ -10,11 +10,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.fmu import fmi_value
-from impedance_cosim.cosim.fmu3 import ssp_type
-from impedance_cosim.cosim.fmu_files import FmuArchiveError, FmuError, check_fmu, model_description
-from impedance_cosim.cosim.ssd2 import REALS, implementation_problem
-from impedance_cosim.cosim.ssp import SystemDescription
+from impedance_cosim.cosim.fmus.files import FmuArchiveError, FmuError, check_fmu, model_description
+from impedance_cosim.cosim.fmus.fmi2 import fmi_value
+from impedance_cosim.cosim.fmus.fmi3 import ssp_type
+from impedance_cosim.cosim.ssp.read import SystemDescription
+from impedance_cosim.cosim.ssp.ssp2 import REALS, implementation_problem
 from impedance_cosim.fmi.variables import ENUMERATIONS
 
 ALGORITHMS = ("gauss-seidel", "jacobi")

@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.cosim.fmu import STATUS
-from impedance_cosim.cosim.fmu3 import is_fmi3
+from impedance_cosim.cosim.fmus.fmi2 import STATUS
+from impedance_cosim.cosim.fmus.fmi3 import is_fmi3
 
-SOURCE = Path(__file__).resolve().parents[2] / "native" / "master" / "loop.c"
+SOURCE = Path(__file__).resolve().parents[3] / "native" / "master" / "loop.c"
 
 
 class Comp(ctypes.Structure):

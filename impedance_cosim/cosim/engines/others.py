@@ -126,7 +126,7 @@ def run_in_libcosim(
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
 
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     sets: dict[str, list] = {}
     if parameter_set is not None:

@@ -16,11 +16,11 @@ import ctypes
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.fmu import STATUS, FmuError, FmuInstance
-from impedance_cosim.cosim.fmu3 import FmuInstance3, open_fmu
-from impedance_cosim.cosim.master import Master
-from impedance_cosim.cosim.results import RunResult
-from impedance_cosim.cosim.run_setup import MasterError
+from impedance_cosim.cosim.fmus.fmi2 import STATUS, FmuError, FmuInstance
+from impedance_cosim.cosim.fmus.fmi3 import FmuInstance3, open_fmu
+from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.setup import MasterError
+from impedance_cosim.cosim.results.result import RunResult
 
 MAX_EVENTS_PER_STEP = 100  # a hang guard: contact chattering inside one communication step
 
@@ -94,7 +94,7 @@ class _Opener:
         self.opened: dict[str, FmuInstance] = {}
 
     def take(self, path: Path, name: str, opener: Any = open_fmu) -> FmuInstance:
-        from impedance_cosim.cosim.fmu_files import model_description
+        from impedance_cosim.cosim.fmus.files import model_description
 
         md = model_description(Path(path).resolve())
         fmu = EventInstance(path, name) if has_event_mode(md) else opener(path, name)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from impedance_cosim.cosim.results import every_kth
+from impedance_cosim.cosim.results.result import every_kth
 from impedance_cosim.util import atomic
 
 ACLASS = ("Atrajectory", "1.1", "", "binTrans")

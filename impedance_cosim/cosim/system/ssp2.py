@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from impedance_cosim.cosim.system import (
+from impedance_cosim.cosim.system.paper import (
     COMPONENTS,
     META,
     NS,
@@ -48,7 +48,7 @@ SRMD_TYPE = "application/x-srmd-meta-data"
 ET.register_namespace("srmd", SRMD_NS)
 FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
 # SSP's top-level meta data as in 1.0, and the tool that wrote the file
-META2 = {**META, "generationTool": f"impedance_cosim {__version__} (cosim/system2.py)"}
+META2 = {**META, "generationTool": f"impedance_cosim {__version__} (cosim/system/ssp2.py)"}
 CLOCK = "sample_clock"  # the clocked controller's input clock, and the system's clock connector
 
 

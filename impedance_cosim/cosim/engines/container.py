@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from impedance_cosim.cosim.engines import EngineError, typed_value
+from impedance_cosim.cosim.engines.others import EngineError, typed_value
 
 FMUCONTAINER = "from fmu_manipulation_toolbox.cli.fmucontainer import fmucontainer; fmucontainer()"
 
@@ -93,7 +93,7 @@ def build_container(
     """Build the container FMU `out` from an archive (parameter_set None: the archive's first
     set, the only one of a scenario's own archive; order: the components in another order than
     the SSD's, to show what the order does). Raises EngineError when fmucontainer fails."""
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     out = Path(out)
     with tempfile.TemporaryDirectory(prefix="impcosim_container_") as tmp:
@@ -149,8 +149,8 @@ def master_like_container(
     """Our master's run of the container's algorithm: Jacobi (parallel), or Gauss-Seidel in the
     SSD's listing order (sequential). Returns the RunResult (divergence limit off: compare as
     far as both run)."""
-    from impedance_cosim.cosim.master import Master
-    from impedance_cosim.cosim.ssp import read_ssp
+    from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.ssp.read import read_ssp
 
     with read_ssp(ssp_path) as system:
         if sequential:

@@ -19,9 +19,9 @@ import ctypes
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from impedance_cosim.cosim.fmu import STATUS, FmuError
-from impedance_cosim.cosim.fmu3 import is_fmi3
-from impedance_cosim.cosim.run_setup import MasterError
+from impedance_cosim.cosim.fmus.fmi2 import STATUS, FmuError
+from impedance_cosim.cosim.fmus.fmi3 import is_fmi3
+from impedance_cosim.cosim.master.setup import MasterError
 
 EXTRAPOLATIONS = ("none", "linear")
 

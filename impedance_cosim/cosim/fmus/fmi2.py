@@ -22,7 +22,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from impedance_cosim.cosim.fmu_files import FmuError, extractions
+from impedance_cosim.cosim.fmus.files import FmuError, extractions
 from impedance_cosim.cosim.leave import exit_process as exit_process
 from impedance_cosim.cosim.leave import fmu_library_loaded as fmu_library_loaded
 from impedance_cosim.cosim.leave import leaked_libraries

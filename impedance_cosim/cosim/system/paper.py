@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.ssp_archive import ANNOTATION_TYPE as ANNOTATION_TYPE
-from impedance_cosim.cosim.ssp_archive import NS as NS
+from impedance_cosim.cosim.ssp.archive import ANNOTATION_TYPE as ANNOTATION_TYPE
+from impedance_cosim.cosim.ssp.archive import NS as NS
 from impedance_cosim.fmi.units import UNITS
 from impedance_cosim.fmi.variables import AUTHOR, COPYRIGHT, Variable
 from impedance_cosim.version import __version__
@@ -63,7 +63,7 @@ COMPONENTS = (
 # torque, the controller samples the plant's current outputs, and it is initialized from them.
 # Our master's Gauss-Seidel order is the annotation's (COMPONENTS above), not this one; the
 # container's sequential mode, Gauss-Seidel in this order, equals Master with order plant,
-# controller (impedance_cosim/cosim/containers.py).
+# controller (impedance_cosim/cosim/engines/container.py).
 SSD_ELEMENT_ORDER = ("plant", "controller")
 
 # (start element, start connector, end element, end connector)
@@ -285,7 +285,7 @@ def source_files() -> dict[str, bytes]:
 
 def write_sources(folder: Path | None = None) -> list[Path]:
     """Write the generated SSD and SSV files into ssp/ (or folder)."""
-    folder = folder or Path(__file__).resolve().parents[2] / "ssp"
+    folder = folder or Path(__file__).resolve().parents[3] / "ssp"
     written = []
     for name, content in source_files().items():
         path = folder / name

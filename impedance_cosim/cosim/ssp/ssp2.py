@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.ssp_archive import NS, SspError
+from impedance_cosim.cosim.ssp.archive import NS, SspError
 
 VERSIONS = ("1.0", "2.0")
 REALS = ("Real", "Float64", "Float32")

@@ -38,13 +38,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from impedance_cosim.cosim import extrapolation as extra
-from impedance_cosim.cosim import fastloop, realtime
-from impedance_cosim.cosim.fmu import FmuError, FmuInstance
-from impedance_cosim.cosim.fmu3 import open_fmu
-from impedance_cosim.cosim.realtime import RealtimeOptions, realtime_stats
-from impedance_cosim.cosim.results import Divergence, Feed, RunResult, Sink, size_problem
-from impedance_cosim.cosim.run_setup import (
+from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
+from impedance_cosim.cosim.fmus.fmi3 import open_fmu
+from impedance_cosim.cosim.master import c_loop as fastloop
+from impedance_cosim.cosim.master import extrapolation as extra
+from impedance_cosim.cosim.master import realtime
+from impedance_cosim.cosim.master.realtime import RealtimeOptions, realtime_stats
+from impedance_cosim.cosim.master.setup import (
     ALGORITHMS,
     MasterError,
     collect_parameters,
@@ -52,7 +52,8 @@ from impedance_cosim.cosim.run_setup import (
     real_outputs,
     step_count,
 )
-from impedance_cosim.cosim.ssp import SspError, SystemDescription
+from impedance_cosim.cosim.results.result import Divergence, Feed, RunResult, Sink, size_problem
+from impedance_cosim.cosim.ssp.read import SspError, SystemDescription
 from impedance_cosim.util.interrupt import RunInterrupted, StopSignals, signal_name
 from impedance_cosim.util.progress import Progress
 

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 
 from controller_model.model import ControllerModel
-from impedance_cosim.cosim.system import CONNECTIONS
+from impedance_cosim.cosim.system.paper import CONNECTIONS
 from plant_model.model import PlantModel
 
-# The system's wiring, from its one definition (impedance_cosim.cosim.system.CONNECTIONS).
+# The system's wiring, from its one definition (impedance_cosim.cosim.system.paper.CONNECTIONS).
 PLANT_TO_CONTROLLER = tuple((sc, ec) for se, sc, ee, ec in CONNECTIONS if se == "plant")
 CONTROLLER_TO_PLANT = tuple((sc, ec) for se, sc, ee, ec in CONNECTIONS if se == "controller")
 

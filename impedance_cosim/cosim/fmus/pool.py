@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim.fmu import FmuError, FmuInstance
+from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 
 
 class InstancePool:

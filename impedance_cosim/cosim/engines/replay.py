@@ -42,7 +42,7 @@ def cs_crossing_times(
     depend on the step size) and the joint angles q1_true..q3_true at every t_i."""
     from fmpy.fmi2 import FMU2Slave
 
-    from impedance_cosim.cosim.fmu_files import extractions
+    from impedance_cosim.cosim.fmus.files import extractions
 
     _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
     vr = {v.name: v.valueReference for v in md.modelVariables}
@@ -97,7 +97,7 @@ def me_replay(
     from fmpy import simulate_fmu
     from fmpy.fmi2 import FMU2Model
 
-    from impedance_cosim.cosim.fmu_files import extractions
+    from impedance_cosim.cosim.fmus.files import extractions
 
     _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
     nx, nz = len(md.derivatives), md.numberOfEventIndicators

@@ -13,9 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from impedance_cosim.cosim import ssd2
-from impedance_cosim.cosim.ssd2 import INTEGERS, REALS, TYPES
-from impedance_cosim.cosim.ssp_archive import (
+from impedance_cosim.cosim.ssp import ssp2 as ssd2
+from impedance_cosim.cosim.ssp.archive import (
     ANNOTATION_TYPE,
     NS,
     Limits,
@@ -23,6 +22,7 @@ from impedance_cosim.cosim.ssp_archive import (
     read_member,
     resolve_source,
 )
+from impedance_cosim.cosim.ssp.ssp2 import INTEGERS, REALS, TYPES
 
 
 @dataclass(frozen=True)

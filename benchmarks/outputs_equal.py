@@ -9,8 +9,8 @@ PYTHONPATH and as cwd, as benchmarks/compare_commits.py does, so each side's own
 Compared: every FMU the build wrote, simulated alone by `fmpy simulate` (co-simulation); every
 system archive under our master (`impedance-cosim run --ssp`); `run`, a 2-point `sweep` and
 `stability linear`; with IMPCOSIM_FMUSIM set, the native FMUs under the Reference FMUs' fmusim.
-Fields that hold times, dates, paths and the inputs' hashes (a rebuilt library has another
-hash; its outputs are what must stay) are left out of the JSON and CSV files compared.
+Fields that hold times, dates, paths and the inputs' hashes and GUIDs (changed sources give
+other ones; the outputs are what must stay) are left out of the JSON and CSV files compared.
 One line per item: equal, DIFFERENT (where), failed (why) or skipped (why); exit status 0 when
 every compared item is equal, 1 otherwise, 2 for bad arguments.
 """
@@ -32,11 +32,12 @@ from typing import Any, NoReturn
 
 HERE = Path(__file__).resolve().parent.parent
 FMU_DIRS = ("", "native", "fmi3", "fmi3/python")
-# JSON keys and CSV columns that differ from run to run (times, dates, paths) or between builds
-# of the same sources (hashes of the inputs); found by running the same commit twice.
+# JSON keys and CSV columns that differ from run to run (times, dates, paths; found by running
+# the same commit twice) or name the inputs (hashes of the archive and FMUs, and the GUID, a hash
+# of an FMU's sources: another commit's sources give another one even if the outputs are equal).
 VARYING = frozenset(
     {"command", "ssp", "started", "wall_time_s", "wall_s", "real_time_factor", "sha256",
-     "ssp_sha256"}
+     "ssp_sha256", "guid"}
 )  # fmt: skip
 NEEDS_PACKAGE = {"MujocoPlant.fmu": "mujoco", "PinocchioPlant.fmu": "pinocchio"}
 FMPY = "import sys; from fmpy.cli import main; sys.argv[0] = 'fmpy'; sys.exit(main())"

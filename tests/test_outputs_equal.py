@@ -33,6 +33,7 @@ def run_json(started: str, wall: float, out: str, rows: int) -> str:
     record = {
         "command": ["impedance-cosim", "run", "--out", out],
         "system": {"ssp": f"{out}/x.ssp", "sha256": out * 8},
+        "fmus": {"plant": {"model": "PumaPlant", "guid": "{" + out + "}", "sha256": out}},
         "started": started,
         "wall_time_s": wall,
         "runs": [{"status": "ok", "rows": rows, "wall_time_s": wall, "real_time_factor": 1 / wall}],

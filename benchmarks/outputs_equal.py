@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import math
 import os
 import shutil
 import signal
@@ -77,6 +78,15 @@ def csv_lines(text: str) -> list[str]:
     return [",".join(row[i] for i in keep if i < len(row)) for row in (x.split(",") for x in lines)]
 
 
+def first_field(x: str, y: str, header: str) -> str:
+    """The first differing comma-separated field of two lines, named by the CSV header if any."""
+    fx, fy, names = x.split(","), y.split(","), header.split(",")
+    i = next((i for i, (u, v) in enumerate(zip(fx, fy)) if u != v), min(len(fx), len(fy)))
+    name = names[i].strip('"') if header and i < len(names) else f"field {i + 1}"
+    u, v = (f[i][:60] if i < len(f) else "(none)" for f in (fx, fy))
+    return f"{name}: {u!r} != {v!r}"
+
+
 def first_difference(a: bytes, b: bytes, suffix: str) -> str | None:
     """None if the two files' contents are equal for comparison, else where they first differ."""
     if a == b:
@@ -94,7 +104,7 @@ def first_difference(a: bytes, b: bytes, suffix: str) -> str | None:
         la, lb = csv_lines(a.decode(errors="replace")), csv_lines(b.decode(errors="replace"))
         for n, (x, y) in enumerate(zip(la, lb), start=1):
             if x != y:
-                return f"line {n}: {x[:60]!r} != {y[:60]!r}"
+                return f"line {n}: " + first_field(x, y, la[0] if suffix == ".csv" else "")
         if len(la) == len(lb):
             return None
         return f"line {min(len(la), len(lb)) + 1}: one file ends ({len(la)} vs {len(lb)} lines)"
@@ -203,9 +213,10 @@ def items(fmus: Path, stop: float, fmusim: str | None) -> list[tuple[str, str, l
             ],
         )
     )
-    plan.append(("stability linear --sensor ideal", "cli",
+    whole = f"{max(1, math.ceil(stop))}"  # stability takes whole seconds only
+    plan.append((f"stability linear --sensor ideal --stop {whole}", "cli",
                  ["stability", "linear", "--ssp", "PaperScenario-native.ssp", "--sensor", "ideal",
-                  "--stop", t, "--serial", "--no-figures", *quiet]))  # fmt: skip
+                  "--stop", whole, "--serial", "--no-figures", *quiet]))  # fmt: skip
     native = [r for r in fmu_list if r.startswith(("native/", "fmi3/")) and "python" not in r]
     if not fmusim:
         plan.append(("fmusim", "skip", ["not found; set IMPCOSIM_FMUSIM=/path/to/fmusim"]))

@@ -12,7 +12,8 @@ system archive under our master (`impedance-cosim run --ssp`); `run`, a 2-point 
 Fields that hold times, dates, paths and the inputs' hashes and GUIDs (changed sources give
 other ones; the outputs are what must stay) are left out of the JSON and CSV files compared.
 One line per item: equal, DIFFERENT (where), failed (why) or skipped (why); exit status 0 when
-every compared item is equal, 1 otherwise, 2 for bad arguments.
+every compared item is equal, 1 otherwise, 2 for bad arguments, 130/143 on SIGINT/SIGTERM (the
+worktrees are removed).
 """
 
 from __future__ import annotations
@@ -316,9 +317,13 @@ def compare(trees: dict[str, Path], tmp: Path, stop: float, fmusim: str | None) 
     return verdicts
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled as Ctrl-C (the worktrees are removed) but with exit status 143."""
+
+
 def interrupted(signum: int, frame: object) -> None:
-    """SIGTERM as Ctrl-C, so that the worktrees are removed."""
-    raise KeyboardInterrupt
+    """The SIGTERM handler: raises Terminated."""
+    raise Terminated
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -348,9 +353,9 @@ def main(argv: list[str] | None = None) -> int:
             new_name = f"{args.new} ({new[:9]})" if new else "the working tree"
             print(f"old {args.old} ({old[:9]}), new {new_name}, stop {args.stop:g} s", flush=True)
             verdicts = compare(trees, tmp, args.stop, fmusim)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as stop:
             print("interrupted", file=sys.stderr)
-            return 130
+            return 143 if isinstance(stop, Terminated) else 130
         except RuntimeError as error:
             print(f"outputs_equal: {error}", file=sys.stderr)
             return 1

@@ -130,7 +130,7 @@ def write_seeds(name: str, dest: Path, work: Path) -> None:
             "logrange": b"controller.B=logrange:1:10",
             "text": b"controller.velocity_source=observer,difference",
         }
-    elif name == "robot_session":
+    elif name in ("robot_session", "result_files", "cli_options", "ssm"):
         seeds = python_module(name).seeds()
     elif name in ("ssp1", "ssp2"):
         seeds = python_module(name).TARGET.seeds()

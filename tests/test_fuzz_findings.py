@@ -1,0 +1,50 @@
+"""Regression tests of what the fuzz targets found (fuzz/, docs/failures.md): each case is a
+reproducer also kept in the target's corpus (fuzz/corpus/<target>/), here with the documented
+outcome spelled out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from impedance_cosim.apps.sweep.table import TableError, read_table
+from impedance_cosim.cosim.results import read_csv
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"", b"\xff\xfe", b"x" * 200_000, b"a,b\n1\n", b"a,b\n1,nope\n"],
+    ids=["empty", "not-utf8", "huge-field", "short-row", "not-a-number"],
+)
+def test_read_csv_refuses_a_bad_file_with_one_line(tmp_path: Path, content: bytes):
+    """fuzz target `result_files`: StopIteration, UnicodeDecodeError and csv.Error came out."""
+    path = tmp_path / "run.csv"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match="run.csv is not a results CSV") as caught:
+        read_csv(path)
+    assert "\n" not in str(caught.value) and not isinstance(caught.value, UnicodeDecodeError)
+
+
+@pytest.mark.parametrize(
+    "content", [b"a,b\n1,2,3\n", b"a,b\n1\n", b"\xff", b"x" * 200_000],
+    ids=["long-row", "short-row", "not-utf8", "huge-field"],
+)  # fmt: skip
+def test_read_table_refuses_a_bad_table_with_table_error(tmp_path: Path, content: bytes):
+    """fuzz target `result_files`: AttributeError (a row longer or shorter than the header),
+    UnicodeDecodeError and csv.Error came out of read_table."""
+    path = tmp_path / "sweep.csv"
+    path.write_bytes(content)
+    with pytest.raises(TableError) as caught:
+        read_table(path)
+    assert "\n" not in str(caught.value)
+
+
+def test_read_csv_and_read_table_still_read_good_files(tmp_path: Path):
+    (tmp_path / "run.csv").write_text('time,"a,b"\n0.0,1.5\n0.0025,2\n')
+    data = read_csv(tmp_path / "run.csv")
+    assert list(data) == ["time", "a,b"] and data["a,b"].tolist() == [1.5, 2.0]
+    (tmp_path / "sweep.csv").write_text("run,controller.K,status,error\n1,10,ok,\n")
+    assert read_table(tmp_path / "sweep.csv") == [
+        {"run": 1, "controller.K": 10, "status": "ok", "error": None}
+    ]

@@ -48,3 +48,13 @@ def test_read_csv_and_read_table_still_read_good_files(tmp_path: Path):
     assert read_table(tmp_path / "sweep.csv") == [
         {"run": 1, "controller.K": 10, "status": "ok", "error": None}
     ]
+
+
+def test_output_interval_of_more_than_2_53_steps_is_a_cli_error():
+    """fuzz target `cli_options`: `run --stop 1e-297 --step 1e-300 --output-interval 1e10` was
+    an internal error (OverflowError: interval / step is inf, round() of it), exit status 1."""
+    from impedance_cosim.apps.options import CliError, output_every
+
+    with pytest.raises(CliError, match="more than 2\\*\\*53 steps"):
+        output_every(1e10, 1e-300, 1000)
+    assert output_every(0.01, 0.0025, 800) == 4

@@ -30,6 +30,8 @@ C_TARGETS = {
     "fmi3_state_controller": ("state.c", "fmi3/ImpedanceController.fmu", ["-DFUZZ_FMI3"]),
     "fmi2_calls_plant": ("calls.c", "native/PumaPlant.fmu", []),
     "fmi2_calls_controller": ("calls.c", "native/ImpedanceController.fmu", []),
+    "fmi3_calls_plant": ("calls3.c", "fmi3/PumaPlant.fmu", []),
+    "fmi3_calls_controller": ("calls3.c", "fmi3/ImpedanceController.fmu", []),
 }
 PY_TARGETS = sorted(p.stem for p in (FUZZ / "py").glob("*.py") if not p.stem.startswith("_"))
 SANITIZE = "-fsanitize=address,undefined"

@@ -58,3 +58,20 @@ def test_output_interval_of_more_than_2_53_steps_is_a_cli_error():
     with pytest.raises(CliError, match="more than 2\\*\\*53 steps"):
         output_every(1e10, 1e-300, 1000)
     assert output_every(0.01, 0.0025, 800) == 4
+
+
+def test_controller_event_after_a_huge_time_skip_is_refused_not_a_hang(native_dir: Path):
+    """fuzz target `fmi3_calls_controller`: fmi3SetTime(1e308) then fmi3UpdateDiscreteStates
+    took every sample up to t (one per 1/400 s: a hang). Now the event refuses to take more
+    than max_samples_per_step samples; the same code serves FMI 2.0 Model Exchange, here."""
+    from fmpy.fmi1 import FMICallException
+    from test_model_exchange import CONTROLLER, MEPlant
+
+    me = MEPlant(native_dir, CONTROLLER)
+    me.initialize()
+    me.fmu.setTime(1e308)
+    with pytest.raises(FMICallException):
+        me.fmu.newDiscreteStates()
+    assert any("max_samples_per_step" in m for m in me.messages), me.messages
+    me.fmu.terminate()
+    me.fmu.freeInstance()

@@ -32,6 +32,7 @@ C_TARGETS = {
     "fmi2_calls_controller": ("calls.c", "native/ImpedanceController.fmu", []),
     "fmi3_calls_plant": ("calls3.c", "fmi3/PumaPlant.fmu", []),
     "fmi3_calls_controller": ("calls3.c", "fmi3/ImpedanceController.fmu", []),
+    "closedloop_params": ("closedloop.c", "fmi3/PaperClosedLoop-observer.fmu", []),
 }
 PY_TARGETS = sorted(p.stem for p in (FUZZ / "py").glob("*.py") if not p.stem.startswith("_"))
 SANITIZE = "-fsanitize=address,undefined"

@@ -30,6 +30,9 @@ C_TARGETS = {
     "fmi3_state_controller": ("state.c", "fmi3/ImpedanceController.fmu", ["-DFUZZ_FMI3"]),
     "fmi2_calls_plant": ("calls.c", "native/PumaPlant.fmu", []),
     "fmi2_calls_controller": ("calls.c", "native/ImpedanceController.fmu", []),
+    "fmi3_calls_plant": ("calls3.c", "fmi3/PumaPlant.fmu", []),
+    "fmi3_calls_controller": ("calls3.c", "fmi3/ImpedanceController.fmu", []),
+    "closedloop_params": ("closedloop.c", "fmi3/PaperClosedLoop-observer.fmu", []),
 }
 PY_TARGETS = sorted(p.stem for p in (FUZZ / "py").glob("*.py") if not p.stem.startswith("_"))
 SANITIZE = "-fsanitize=address,undefined"
@@ -130,7 +133,7 @@ def write_seeds(name: str, dest: Path, work: Path) -> None:
             "logrange": b"controller.B=logrange:1:10",
             "text": b"controller.velocity_source=observer,difference",
         }
-    elif name == "robot_session":
+    elif name in ("robot_session", "result_files", "cli_options", "ssm"):
         seeds = python_module(name).seeds()
     elif name in ("ssp1", "ssp2"):
         seeds = python_module(name).TARGET.seeds()

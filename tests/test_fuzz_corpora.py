@@ -25,6 +25,17 @@ def fmus(fmi3_dir: Path, monkeypatch_module) -> Path:
 
 
 @pytest.fixture(scope="module")
+def closed_loop(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A build output holding fmi3/PaperClosedLoop-observer.fmu (a folder of its own: other
+    tests count the session's FMUs)."""
+    from impedance_cosim.packaging.closedloop import build_closed_loop3
+
+    out = tmp_path_factory.mktemp("fuzz-closedloop")
+    build_closed_loop3("observer", out / "fmi3")
+    return out
+
+
+@pytest.fixture(scope="module")
 def monkeypatch_module():
     with pytest.MonkeyPatch.context() as mp:
         yield mp
@@ -46,9 +57,11 @@ def test_python_target_replays_its_corpus(name, fmus):
 
 
 @pytest.mark.parametrize("name", list(targets.C_TARGETS))
-def test_c_target_replays_its_corpus(name, fmus, tmp_path):
+def test_c_target_replays_its_corpus(name, fmus, tmp_path, request):
     if not targets.clang():
         pytest.skip("clang is not installed (apt-get install clang libclang-rt-14-dev)")
+    if not (fmus / targets.C_TARGETS[name][1]).exists():  # the closed loop: built on request
+        fmus = request.getfixturevalue("closed_loop")
     exe = targets.build_c(name, fmus, tmp_path, libfuzzer=False)
     files = [str(p) for p in targets.corpus(name)]
     done = subprocess.run([str(exe), *files], capture_output=True, text=True, timeout=120)

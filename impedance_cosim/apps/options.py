@@ -159,6 +159,9 @@ def output_every(interval: float | None, step: float, steps: int | None = None) 
     the run length (else the last row, at the stop time, would not be written)."""
     if interval is None:
         return 1
+    if not interval / step < 2**53:  # a row every 2**53 steps or more (or inf: round() fails)
+        raise CliError(f"--output-interval {interval:g} s is more than 2**53 steps of"
+                       f" {step:g} s: no row but the first would be written")  # fmt: skip
     every = round(interval / step)
     if every < 1 or abs(every * step - interval) > 1e-9 * max(interval, step):
         raise CliError(f"--output-interval {interval:g} s is not a multiple of the step"

@@ -648,6 +648,16 @@ int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
     read_params(d, &p);
     tol = TIME_TOL * p.ts;
     if (m->start_time + (double)m->k_next * p.ts <= t + tol) {
+        const int n_max = d->i[VR_max_samples_per_step];
+        if (m->start_time + (double)(m->k_next + n_max) * p.ts <= t + tol) {
+            char buf[2][32]; /* sample k_next + n_max is due: the host skipped that many */
+            float_repr(t, buf[0], sizeof buf[0]);
+            float_repr(m->t, buf[1], sizeof buf[1]);
+            return fail(msg,
+                        "an event at t=%s from t=%s would take more than %d samples (parameter"
+                        " max_samples_per_step): the host skipped the time events between",
+                        buf[0], buf[1], n_max);
+        }
         if (split_inputs(d, q, f, qd_meas, msg)) {
             return 1;
         }

@@ -60,9 +60,16 @@ def replace_text(path: Path, text: str) -> None:
 
 
 def read_table(path: Path) -> list[dict]:
-    """Rows of a sweep table (numbers parsed, empty cells None)."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+    """Rows of a sweep table (numbers parsed, empty cells None); TableError (one line) if the
+    file is not one: not UTF-8, not CSV, a row of another width than the header."""
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise TableError(f"cannot read {path}: {' '.join(str(exc).split())}") from None
+    for n, row in enumerate(rows, start=2):
+        if None in row or None in row.values():
+            raise TableError(f"{path}: row {n - 1} has another number of cells than the header")
     return [
         {
             k: (None if v == "" else v if k in ("status", "error") else parse_value(v))

@@ -284,10 +284,17 @@ def _quote(name: str) -> str:
 
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a results CSV, by name."""
-    with open(path, newline="") as f:
-        reader = csv.reader(f)
-        names = [n.strip('"') for n in next(reader)]
-        rows = [[float(v) for v in row] for row in reader]
-    data = np.array(rows).reshape(len(rows), len(names))
+    """Columns of a results CSV, by name; ValueError (one line naming the file) if it is not
+    one: not UTF-8, no header, a cell that is not a number, a row of another width."""
+    try:
+        with open(path, newline="") as f:
+            reader = csv.reader(f)
+            names = [n.strip('"') for n in next(reader, [])]
+            rows = [[float(v) for v in row] for row in reader]
+        if not names or any(len(row) != len(names) for row in rows):
+            raise ValueError("no header, or a row of another width than the header")
+    except (UnicodeDecodeError, csv.Error, ValueError) as exc:
+        why = " ".join(str(exc).split())[:200]
+        raise ValueError(f"{Path(path).name} is not a results CSV ({why})") from None
+    data = np.array(rows, dtype=float).reshape(len(rows), len(names))
     return {n: data[:, k] for k, n in enumerate(names)}

@@ -142,7 +142,7 @@ RUN_EXIT_STATUS = (
 def _dispatch(args: argparse.Namespace) -> int:
     """Run a subcommand; every failure becomes one line on stderr and an exit status:
     2 bad input, 1 a failed run or other error, 128 + signal number when interrupted; a command
-    may return 3 itself: a run diverged, which is a result (cosim.results.exit_status)."""
+    may return 3 itself: a run diverged, which is a result (cosim.results.result.exit_status)."""
     from impedance_cosim.apps.options import CliError
     from impedance_cosim.cosim.fmus.fmi2 import FmuError
     from impedance_cosim.cosim.master.master import MasterError

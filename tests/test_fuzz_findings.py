@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from impedance_cosim.apps.sweep.table import TableError, read_table
-from impedance_cosim.cosim.results import read_csv
+from impedance_cosim.cosim.results.result import read_csv
 
 
 @pytest.mark.parametrize(

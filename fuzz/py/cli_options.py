@@ -22,7 +22,7 @@ from impedance_cosim import cli
 from impedance_cosim.apps import hil, options
 from impedance_cosim.apps.stability import command as stability_command
 from impedance_cosim.apps.sweep import command as sweep_command
-from impedance_cosim.cosim.realtime import realtime_setting
+from impedance_cosim.cosim.master.realtime import realtime_setting
 
 PARSER = cli.build_parser("*")
 hil._session_key = lambda token_file: b"k" * 32  # the real one creates --token-file

@@ -2,7 +2,7 @@
 """Fuzz target: the readers of our own result files, fed the bytes as the file. Byte 0 picks the
 reader, the rest is the file:
 
-0. cosim.results.read_csv (a run's CSV, read back by the regression compare): only ValueError
+0. cosim.results.result.read_csv (a run's CSV, read back by the regression compare): only ValueError
    with a one-line message (not a bare UnicodeDecodeError) may come out;
 1. apps.sweep.table.read_table (a sweep's table): only TableError;
 2. SweepTable resume (--resume of a sweep: the table, byte 1 even, or its plan.json, odd): only
@@ -27,7 +27,7 @@ from impedance_cosim.apps.stability.bisection import StabilityError
 from impedance_cosim.apps.stability.log import PartLog, Record
 from impedance_cosim.apps.stability.parts import LINEAR_COLUMNS
 from impedance_cosim.apps.sweep import table as sweep_table
-from impedance_cosim.cosim import results
+from impedance_cosim.cosim.results import result as results
 
 TMP = Path(tempfile.mkdtemp(prefix="impcosim-fuzz-results-"))
 AXIS = "controller.K"

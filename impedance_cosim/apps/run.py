@@ -2,7 +2,7 @@
 pair; under sample-and-hold also the pair under one sample of delay, the paper's Fig. 4), the
 FMUs built first when they are missing or out of date (apps/build_cmd.py).
 
-A diverged run is a result (cosim.results): its rows, its summary, its Fig. 4, exit status 3;
+A diverged run is a result (cosim.results.result): its rows, its summary, its Fig. 4, exit status 3;
 a failed one is exit status 1. A command writes into a staging folder inside the results folder
 (`.staging-<pid>/`). When it completes (exit 0 or 3) its files replace those of an earlier one,
 and the earlier one's result files (known names only) that this one did not write are removed,

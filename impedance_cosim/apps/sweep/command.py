@@ -245,7 +245,7 @@ def _study_reports(args: argparse.Namespace, out: Path, tables: list, written: l
 
 
 def _write_provenance(args: argparse.Namespace, table, started: str, wall: float) -> None:
-    """<table>.run.json beside the table: how it was made (see cosim.provenance)."""
+    """<table>.run.json beside the table: how it was made (see cosim.results.provenance)."""
     statuses: dict[str, int] = {}
     for cells in table.cells.values():
         status = cells[table.names.index("status")]

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import io
 import re
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -287,3 +289,20 @@ def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
     monkeypatch.setattr(master._RunProgress, "DELAY", 60.0)
     Master(system, stop_time=2.0, loop=loop).run(progress=quiet)
     assert quiet.getvalue() == ""  # a run shorter than the delay shows nothing
+
+
+def test_enumeration_item_names_resolve_without_importing_the_models_first():
+    """A parameter set's item name (velocity_source="difference") resolves through the master's
+    explicit table of our enumerations, in a process that imported nothing else before (it used
+    to rely on a registry that importing controller_model filled as a side effect)."""
+    from controller_model.parameters import VELOCITY_SOURCE
+
+    code = (
+        "from types import SimpleNamespace as N\n"
+        "from impedance_cosim.cosim.master.setup import _value\n"
+        "v = N(declaredType=N(name='VelocitySource'), type='Integer')\n"
+        "print(_value(v, 'difference', 'controller.velocity_source'))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(VELOCITY_SOURCE.value("difference"))

@@ -27,7 +27,6 @@ PYTHON_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
 # process on an SSP Enumeration connector or value ("Don't know how to handle Enumeration type").
 # So an enumeration is declared an Integer with min/max and a declared type whose description
 # lists the items (model_description.py).
-ENUMERATIONS: dict[str, Enumeration] = {}  # every Enumeration defined, by type name
 
 
 @dataclass(frozen=True)
@@ -38,9 +37,6 @@ class Enumeration:
     name: str
     description: str
     items: tuple[tuple[str, str], ...]
-
-    def __post_init__(self) -> None:
-        ENUMERATIONS[self.name] = self
 
     def value(self, item: str) -> int:
         """The value of an item name (ValueError naming the choices if unknown)."""

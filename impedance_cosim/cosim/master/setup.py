@@ -10,14 +10,17 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from controller_model.parameters import VELOCITY_SOURCE
 from impedance_cosim.cosim.fmus.files import FmuArchiveError, FmuError, check_fmu, model_description
 from impedance_cosim.cosim.fmus.fmi2 import fmi_value
 from impedance_cosim.cosim.fmus.fmi3 import ssp_type
 from impedance_cosim.cosim.ssp.read import SystemDescription
 from impedance_cosim.cosim.ssp.ssp2 import REALS, implementation_problem
-from impedance_cosim.fmi.variables import ENUMERATIONS
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
+# The enumeration types of our models, by declared type name: a parameter set's or --set's item
+# name (velocity_source="observer") resolves through them. Any other FMU's Integer takes numbers.
+ENUMERATIONS = {e.name: e for e in (VELOCITY_SOURCE,)}
 
 
 class MasterError(RuntimeError):

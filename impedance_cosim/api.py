@@ -37,7 +37,7 @@ import numpy as np
 
 from impedance_cosim.apps import analysis
 from impedance_cosim.apps.options import DEFAULT_SSP
-from impedance_cosim.apps.run import echo_fmu_output
+from impedance_cosim.cosim.fmus.output import echo_fmu_output
 from impedance_cosim.cosim.master.master import Master, MasterError, RunResult
 from impedance_cosim.cosim.results import provenance
 from impedance_cosim.cosim.results.result import Divergence, run_status

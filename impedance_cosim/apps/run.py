@@ -31,6 +31,7 @@ from impedance_cosim.apps.options import (
     parse_overrides,
     prepare_out,
 )
+from impedance_cosim.cosim.fmus.output import echo_fmu_output
 from impedance_cosim.cosim.results import provenance
 
 
@@ -370,11 +371,3 @@ def _figure(draw, path: Path, *runs) -> Path:
     with atomic.atomic_path(path, suffix=".tmp" + path.suffix) as tmp:  # the suffix: the format
         draw(*runs, tmp)
     return path
-
-
-def echo_fmu_output(text: str, stream) -> None:
-    """What Python FMUs printed to stderr during a run, less their error reports (the host gets
-    those through the FMU logger and puts them in its one-line error)."""
-    for line in text.splitlines():
-        if line.strip() and not line.startswith("error: "):
-            print(line, file=stream)

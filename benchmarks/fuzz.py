@@ -25,7 +25,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
 import targets  # noqa: E402
 
-FLAGS = ["-timeout=10", "-rss_limit_mb=2048", "-print_final_stats=1", "-max_len=16384"]
+FLAGS = ["-timeout=30", "-rss_limit_mb=2048", "-print_final_stats=1", "-max_len=16384"]
 
 
 _BUILT: dict[str, Path] = {}

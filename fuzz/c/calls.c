@@ -30,20 +30,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
 }
 static const fmi2CallbackFunctions CALLBACKS = {logger, calloc, free, NULL, NULL};
 
-typedef struct {
-    const uint8_t *p;
-    size_t n;
-} Input;
-
-static unsigned next(Input *in)
-{
-    if (!in->n) {
-        return 0;
-    }
-    in->n--;
-    return *in->p++;
-}
-#define PICK(in, table) (table[next(in) % (sizeof table / sizeof table[0])])
+#include "input.h" /* Input, next(), PICK */
 
 static fmi2ValueReference any_vr(Input *in)
 {

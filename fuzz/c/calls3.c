@@ -33,20 +33,7 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
     (void)env, (void)status, (void)category, (void)message;
 }
 
-typedef struct {
-    const uint8_t *p;
-    size_t n;
-} Input;
-
-static unsigned next(Input *in)
-{
-    if (!in->n) {
-        return 0;
-    }
-    in->n--;
-    return *in->p++;
-}
-#define PICK(in, table) (table[next(in) % (sizeof table / sizeof table[0])])
+#include "input.h" /* Input, next(), PICK */
 
 static fmi3ValueReference any_vr(Input *in)
 {

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import difflib
+import functools
 import math
 import signal
 import sys
@@ -47,6 +48,31 @@ def add_parser(sub) -> None:
         "shorthand controller.K = K1..K3), aliases and system.* pseudo-parameters "
         "(--list-parameters).",
     )
+    _add_points(p)
+    _add_system(p)
+    _add_execution(p)
+    _add_outputs(p)
+    p.add_argument(
+        "--study",
+        nargs="*",
+        choices=list(STUDY),
+        default=None,
+        metavar="MAP",
+        help=f"run the stability study's maps ({', '.join(STUDY)}; default all): "
+        "map_<name>.csv/.png into --out",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="finish an interrupted sweep: keep the finished runs of the table in --out (same "
+        "command otherwise) and run only the others",
+    )
+    p.add_argument("--list-parameters", action="store_true", help="list the sweepable names")
+    p.set_defaults(func=_cmd_sweep)
+
+
+def _add_points(p: argparse.ArgumentParser) -> None:
+    """The swept points: --grid or --random (with --seed), and the fixed --set values."""
     p.add_argument(
         "--grid",
         action="append",
@@ -70,6 +96,10 @@ def add_parser(sub) -> None:
         metavar="NAME=VALUE",
         help="a fixed parameter for every run (repeatable)",
     )
+
+
+def _add_system(p: argparse.ArgumentParser) -> None:
+    """The system and how it runs: archive, parameter set, algorithm, stop time, step."""
     p.add_argument(
         "--ssp",
         default=None,
@@ -89,6 +119,10 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--stop", type=float, default=None, help="stop time [s] (default 20)")
     p.add_argument("--step", type=float, default=None, help="communication step [s] (1/400)")
+
+
+def _add_execution(p: argparse.ArgumentParser) -> None:
+    """Where the runs go: a dask scheduler, local workers, or this process."""
     p.add_argument(
         "--scheduler",
         default=None,
@@ -108,6 +142,10 @@ def add_parser(sub) -> None:
         help="seconds to reach the scheduler (default 3)",
     )
     p.add_argument("--serial", action="store_true", help="no dask: the runs in this process")
+
+
+def _add_outputs(p: argparse.ArgumentParser) -> None:
+    """What is written: the folder, the maps, the report, the progress display."""
     p.add_argument("--out", default="results/sweep", help="output folder (default results/sweep)")
     p.add_argument(
         "--plot",
@@ -123,23 +161,6 @@ def add_parser(sub) -> None:
         action="store_true",
         help="no progress display (a bar on a terminal, a line every 10 s otherwise)",
     )
-    p.add_argument(
-        "--study",
-        nargs="*",
-        choices=list(STUDY),
-        default=None,
-        metavar="MAP",
-        help=f"run the stability study's maps ({', '.join(STUDY)}; default all): "
-        "map_<name>.csv/.png into --out",
-    )
-    p.add_argument(
-        "--resume",
-        action="store_true",
-        help="finish an interrupted sweep: keep the finished runs of the table in --out (same "
-        "command otherwise) and run only the others",
-    )
-    p.add_argument("--list-parameters", action="store_true", help="list the sweepable names")
-    p.set_defaults(func=_cmd_sweep)
 
 
 @contextlib.contextmanager
@@ -282,35 +303,9 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
         return 0
     progress = not args.no_progress
     out = Path(args.out)
-
-    def client(runs: int | None = None):
-        """The dask client, said on stdout first (the first sign of the cluster, reported after
-        our signal handlers are in place); a LocalCluster of at most as many workers as runs."""
-        from impedance_cosim.apps.sweep.cluster import dask_client, local_workers
-
-        if args.scheduler:
-            print(f"dask: the scheduler at {args.scheduler}", flush=True)
-            return dask_client(args.scheduler, None, args.connect_timeout)
-        n = local_workers(args.workers, runs)
-        print(f"dask: starting a LocalCluster of {n} worker processes", flush=True)
-        return dask_client(None, n, args.connect_timeout)
-
-    factory = None if args.serial else client
+    factory = None if args.serial else functools.partial(_client, args)
     if args.study is not None:
-        if args.grid or args.random is not None:
-            raise SweepError("--study runs its own grids: give it no --grid/--random")
-        names = args.study or list(STUDY)
-        ssp = ssp or default_ssp()
-        started = time.perf_counter()
-        _lock_out(out, held)
-        written = run_study(names, out, ssp, factory, progress, args.stop, args.resume, tables,
-                            plots=not args.no_plots)  # fmt: skip
-        print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
-        for path in written:
-            print(f"  {path}")
-        if not args.no_report:
-            _study_reports(args, out, tables, written)
-        return 0
+        return _study(args, ssp or default_ssp(), factory, tables, held)
     if not args.grid:
         raise SweepError("nothing to sweep: give at least one --grid component.variable=values")
     plan = plan_sweep(
@@ -336,7 +331,14 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
             RunProgress(len(plan.points) - kept, progress) as tick,
         ):
             rows = run_plan(plan, table, c, tick)
-    elapsed = time.perf_counter() - started
+    _report_grid(args, plan, rows, table, time.perf_counter() - started, kept)
+    return 0
+
+
+def _report_grid(args: argparse.Namespace, plan, rows: list, table, elapsed: float, kept: int):
+    """After a grid: the runs' count and time, the unbounded ones, the maps and the report."""
+    out = Path(args.out)
+    path = out / "sweep.csv"
     bad = [r for r in rows if r["status"] != "ok"]
     resumed = f" ({kept} kept from the table)" if args.resume else ""
     print(
@@ -357,4 +359,34 @@ def _sweep(args: argparse.Namespace, tables: list, held: contextlib.ExitStack) -
 
         record = {"command": args.command_line, "table": str(path), **table.plan}
         print(f"  {report.write_sweep_report(out, rows, maps, record)}")
+
+
+def _client(args: argparse.Namespace, runs: int | None = None):
+    """The dask client, said on stdout first (the first sign of the cluster, reported after our
+    signal handlers are in place); a LocalCluster of at most as many workers as runs."""
+    from impedance_cosim.apps.sweep.cluster import dask_client, local_workers
+
+    if args.scheduler:
+        print(f"dask: the scheduler at {args.scheduler}", flush=True)
+        return dask_client(args.scheduler, None, args.connect_timeout)
+    n = local_workers(args.workers, runs)
+    print(f"dask: starting a LocalCluster of {n} worker processes", flush=True)
+    return dask_client(None, n, args.connect_timeout)
+
+
+def _study(args: argparse.Namespace, ssp: Path, factory, tables: list, held) -> int:
+    """`sweep --study`: the stability study's maps, then their reports."""
+    if args.grid or args.random is not None:
+        raise SweepError("--study runs its own grids: give it no --grid/--random")
+    names = args.study or list(STUDY)
+    out = Path(args.out)
+    started = time.perf_counter()
+    _lock_out(out, held)
+    written = run_study(names, out, ssp, factory, not args.no_progress, args.stop, args.resume,
+                        tables, plots=not args.no_plots)  # fmt: skip
+    print(f"study ({', '.join(names)}): {time.perf_counter() - started:.1f} s")
+    for path in written:
+        print(f"  {path}")
+    if not args.no_report:
+        _study_reports(args, out, tables, written)
     return 0

@@ -3,6 +3,7 @@ on dask (or in series), the metrics of every run in one table, and maps of them 
 study, `impedance-cosim stability`, is apps.stability, built on these runs).
 
 The modules, each importing only those above it:
+  points     the points of a grid or of a seeded random sample, from the axes
   plan       what to run: swept axes, one point per run, checked before any work (SweepError)
   metrics    what a run measures (METRICS, run_metrics)
   table      the table on disk: rows appended as runs finish, resume, one writer per table

@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import difflib
 import hashlib
-import itertools
 import math
 import os
-import random
 import re
 import sys
 from collections.abc import Mapping, Sequence
@@ -30,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from impedance_cosim.apps.options import FMUS_DIR, PACKAGED_FMUS, REPO  # noqa: F401 (sweep's)
+from impedance_cosim.apps.sweep.points import grid_points, random_points
 from impedance_cosim.cosim.master.master import ALGORITHMS, Master, MasterError
 
 DEFAULT_SSP = FMUS_DIR / "PaperScenario-native.ssp"
@@ -292,56 +291,17 @@ def plan_sweep(
         raise SweepError("nothing to sweep: give at least one --grid component.variable=values")
     system = system or read_ssp(ssp)
     known = known_parameters(system)
-    axes: dict[str, Any] = {}
-    for item in grid:
-        name, values = parse_axis(item)
-        name = resolve_name(name, known, system)
-        if name in axes:
-            raise SweepError(f"{name} is swept twice")
-        if isinstance(values, tuple) and random_runs is None:
-            raise SweepError(
-                f"{name}: {values[0]}:LOW:HIGH is for --random sweeps; a grid needs "
-                "values or lin:/log:START:STOP:COUNT"
-            )
-        if not isinstance(values, tuple):
-            _check_axis_values(name, values, system)
-        axes[name] = values
-    fixed_values = {}
-    for item in fixed:
-        name, sep, value = item.partition("=")
-        if not sep or not value.strip():
-            raise SweepError(f"--set expects component.variable=value (got {item!r})")
-        name = resolve_name(name.strip(), known, system)
-        fixed_values[name] = parse_value(value)
-        _check_axis_values(name, [fixed_values[name]], system)
-    if random_runs is not None:
-        if not 1 <= random_runs <= MAX_RUNS:
-            raise SweepError(f"--random needs 1..{MAX_RUNS} runs (got {random_runs})")
-        rng = random.Random(seed)
-        points = []
-        for _ in range(random_runs):
-            point = {}
-            for name, values in axes.items():
-                if isinstance(values, tuple):
-                    kind, lo, hi = values
-                    v = (
-                        math.exp(rng.uniform(math.log(lo), math.log(hi)))
-                        if kind == "logrange"
-                        else rng.uniform(lo, hi)
-                    )
-                    if name in ("system.rate", "system.encoder_bits"):
-                        v = int(round(v))  # whole Hz: a whole number of steps per second
-                    point[name] = v
-                else:
-                    point[name] = rng.choice(values)
-            points.append(point)
-        mode = "random"
-    else:
+    axes = _axes(grid, known, system, random_runs is not None)
+    fixed_values = _fixed_values(fixed, known, system)
+    if random_runs is None:
         runs = math.prod(len(v) for v in axes.values())
         if runs > MAX_RUNS:
             raise SweepError(f"the grid has {runs:.3g} runs, more than {MAX_RUNS}: fewer values")
-        points = [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
-        mode = "grid"
+        points, mode = grid_points(axes), "grid"
+    elif not 1 <= random_runs <= MAX_RUNS:
+        raise SweepError(f"--random needs 1..{MAX_RUNS} runs (got {random_runs})")
+    else:
+        points, mode = random_points(axes, random_runs, seed), "random"
     nominal = Master(system, parameter_set=scenario)  # checks the scenario name
     plant_md = {v.name: v for v in nominal.descriptions["plant"].modelVariables}
     friction = [
@@ -364,6 +324,38 @@ def plan_sweep(
         except (MasterError, ValueError) as exc:
             raise SweepError(f"run {i + 1} of {len(points)} ({where}): {exc}") from None
     return Plan(ssp=ssp, axes=axes, points=points, options=options, mode=mode, fixed=fixed_values)
+
+
+def _axes(grid: Sequence[str], known: dict, system, random: bool) -> dict[str, Any]:
+    """The swept axes by resolved name: a list of values, or (kind, low, high) for --random."""
+    axes: dict[str, Any] = {}
+    for item in grid:
+        name, values = parse_axis(item)
+        name = resolve_name(name, known, system)
+        if name in axes:
+            raise SweepError(f"{name} is swept twice")
+        if isinstance(values, tuple) and not random:
+            raise SweepError(
+                f"{name}: {values[0]}:LOW:HIGH is for --random sweeps; a grid needs "
+                "values or lin:/log:START:STOP:COUNT"
+            )
+        if not isinstance(values, tuple):
+            _check_axis_values(name, values, system)
+        axes[name] = values
+    return axes
+
+
+def _fixed_values(fixed: Sequence[str], known: dict, system) -> dict[str, Any]:
+    """The --set items (name=value) by resolved name, each value checked."""
+    values: dict[str, Any] = {}
+    for item in fixed:
+        name, sep, value = item.partition("=")
+        if not sep or not value.strip():
+            raise SweepError(f"--set expects component.variable=value (got {item!r})")
+        name = resolve_name(name.strip(), known, system)
+        values[name] = parse_value(value)
+        _check_axis_values(name, [values[name]], system)
+    return values
 
 
 def archive_payload(ssp: Path) -> tuple[bytes, str]:

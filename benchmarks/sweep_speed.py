@@ -128,7 +128,7 @@ def per_run_overhead() -> None:
     reused), CPU time by phase; overhead = everything but the C loop's stepping."""
     from impedance_cosim.apps.sweep import table, worker
     from impedance_cosim.apps.sweep.plan import archive_payload
-    from impedance_cosim.cosim.master import c_loop as fastloop
+    from impedance_cosim.cosim.master import c_loop
     from impedance_cosim.cosim.master import master as master_module
     from impedance_cosim.cosim.ssp.read import read_ssp
 
@@ -156,7 +156,7 @@ def per_run_overhead() -> None:
     planning = clock() - t
     payload, digest = str(native.resolve()), archive_payload(native)[1]
     worker.run_batch(payload, digest, points[:1], maps[0].options)  # the worker's setup
-    original_stepper = fastloop.stepper
+    original_stepper = c_loop.stepper
 
     def stepper(*a, **k):
         steps = original_stepper(*a, **k)
@@ -170,7 +170,7 @@ def per_run_overhead() -> None:
 
         return timed_steps
 
-    fastloop.stepper = stepper
+    c_loop.stepper = stepper
     timed(master_module.Master, "__init__", "master set-up (parameters, checks)")
     timed(master_module, "open_fmu", "FMU instantiation (new instances)")
     timed(master_module.Master, "_initialize", "FMU set-up, parameters, initialization")
@@ -188,7 +188,7 @@ def per_run_overhead() -> None:
                     tab.add(i, row)
             writing = clock() - t
     finally:
-        fastloop.stepper = original_stepper
+        c_loop.stepper = original_stepper
     n = len(points)
     stepping = spent.pop("stepping")
     print(f"\nper-run overhead, the study's {n} runs in one process as a worker runs them "

@@ -268,10 +268,10 @@ def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
     terminal; each names the parameter set and shows steps, simulated time and real-time factor."""
     from impedance_cosim.cosim.master import master
 
-    if loop == "c" and master.fastloop.load() is None:
+    if loop == "c" and master.c_loop.load() is None:
         pytest.skip("no C compiler for the compiled loop")
-    monkeypatch.setattr(master._RunProgress, "DELAY", 0.0)
-    monkeypatch.setattr(master._RunProgress, "EVERY", 0.0)
+    monkeypatch.setattr(master.StepProgress, "DELAY", 0.0)
+    monkeypatch.setattr(master.StepProgress, "EVERY", 0.0)
     system = read_ssp(ssp_path)
     log = io.StringIO()
     result = Master(system, stop_time=2.0, loop=loop).run(progress=log)
@@ -286,7 +286,7 @@ def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
     Master(system, stop_time=2.0, loop=loop).run(progress=terminal)
     assert "\r" in terminal.getvalue() and "800/800" in terminal.getvalue()
     quiet = io.StringIO()
-    monkeypatch.setattr(master._RunProgress, "DELAY", 60.0)
+    monkeypatch.setattr(master.StepProgress, "DELAY", 60.0)
     Master(system, stop_time=2.0, loop=loop).run(progress=quiet)
     assert quiet.getvalue() == ""  # a run shorter than the delay shows nothing
 

@@ -89,3 +89,22 @@ def _is_terminal(stream: TextIO) -> bool:
         return stream.isatty()
     except (AttributeError, ValueError):
         return False
+
+
+class StepProgress(Progress):
+    """A simulation's progress in fixed steps of h from t0 (the master's run), shown once it has
+    taken more than a second, with the simulated time and the real-time factor."""
+
+    DELAY, EVERY = 1.0, 10.0  # s: nothing before DELAY; in a log, a line every EVERY
+
+    def __init__(self, steps: int, name: str, t0: float, h: float, stream: TextIO) -> None:
+        super().__init__(steps, name, "step", stream=stream, delay=self.DELAY, every=self.EVERY)
+        self.t0, self.h = t0, h
+
+    def update_steps(self, i: int) -> None:
+        """i steps done."""
+        if not self.enabled:
+            return
+        elapsed = time.perf_counter() - self.start
+        factor = i * self.h / elapsed if elapsed > 0 else 0.0
+        self.update(i, f"t={self.t0 + i * self.h:.2f} s, {factor:.1f}x real time")

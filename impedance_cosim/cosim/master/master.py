@@ -40,9 +40,8 @@ import numpy as np
 
 from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 from impedance_cosim.cosim.fmus.fmi3 import open_fmu
-from impedance_cosim.cosim.master import c_loop as fastloop
+from impedance_cosim.cosim.master import c_loop, realtime
 from impedance_cosim.cosim.master import extrapolation as extra
-from impedance_cosim.cosim.master import realtime
 from impedance_cosim.cosim.master.realtime import RealtimeOptions, realtime_stats
 from impedance_cosim.cosim.master.setup import (
     ALGORITHMS,
@@ -55,7 +54,7 @@ from impedance_cosim.cosim.master.setup import (
 from impedance_cosim.cosim.results.result import Divergence, Feed, RunResult, Sink, size_problem
 from impedance_cosim.cosim.ssp.read import SspError, SystemDescription
 from impedance_cosim.util.interrupt import RunInterrupted, StopSignals, signal_name
-from impedance_cosim.util.progress import Progress
+from impedance_cosim.util.progress import StepProgress
 
 CHUNK = 400  # steps per call into the loop (progress bar, interrupts)
 RT_COLUMNS = ["rt.start_late_s", "rt.compute_s", "rt.lateness_s"]
@@ -194,34 +193,14 @@ class Master:
         bar = self._progress(n, progress)
         ordered: list[_Slot] = []
         try:
-            for name in self.order:
-                path = self.fmu_files[name]
-                fmu = self.instances.take(path, name, open_fmu) if self.instances else None
-                ordered.append(_Slot(name, fmu or open_fmu(path, name)))
-            self._wire(ordered)
-            try:
-                self._initialize(ordered)
-            except FmuError as exc:  # the phase, after the component's name
-                comp, sep, rest = str(exc).partition(": ")
-                raise FmuError(f"{comp}: in initialization: {rest}" if sep else
-                               f"in initialization: {exc}") from None  # fmt: skip
+            self._open(ordered)
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
             if self.extrapolation != "none":
                 extra.prepare(ordered)  # the sources' output derivatives at t_0
             error = self._check_row(names, data[0], t0)
-            unsupported = fastloop.unsupported(ordered)
-            if self.loop == "c" and unsupported:
-                raise MasterError(f"the C loop cannot run this system: {unsupported}")
-            fast = fastloop.load() if self.loop != "python" and not unsupported else None
-            if self.loop == "c" and fast is None:
-                raise MasterError("the C loop cannot be compiled here (no C compiler?)")
-            step = self._python_steps
-            if fast:
-                step = fastloop.stepper(fast, ordered, data, self.algorithm == "jacobi",
-                                        self.start_time, self.step_size, self.divergence_limit,
-                                        self._check_row, self.extrapolation != "none")  # fmt: skip
+            fast, step = self._stepper(ordered, data)
             stepping = wallclock.perf_counter()
             if self.realtime and not error:
                 rt = self.realtime if isinstance(self.realtime, RealtimeOptions) else None
@@ -251,14 +230,7 @@ class Master:
         finally:
             if bar:
                 bar.close()
-            for s in ordered:
-                try:
-                    s.fmu.terminate()
-                    # a diverged run's FMUs returned no error: reset, they are reused (sweeps)
-                    clean = error is None or isinstance(error, Divergence)
-                except FmuError:
-                    clean = False
-                self.instances.give(s.fmu, clean) if self.instances else s.fmu.free()
+            self._release(ordered, error)
             feed(data, rows, timing)
         data = data[:rows]
         divergence = error if isinstance(error, Divergence) else None
@@ -278,12 +250,53 @@ class Master:
             divergence=divergence,
         )
 
-    def _progress(self, steps: int, progress: bool | TextIO) -> _RunProgress | None:
+    def _open(self, ordered: list[_Slot]) -> None:
+        """Open (or take from the pool) each FMU into ordered, as it opens (so that a failure
+        later still releases those opened), wire and initialize them."""
+        for name in self.order:
+            path = self.fmu_files[name]
+            fmu = self.instances.take(path, name, open_fmu) if self.instances else None
+            ordered.append(_Slot(name, fmu or open_fmu(path, name)))
+        self._wire(ordered)
+        try:
+            self._initialize(ordered)
+        except FmuError as exc:  # the phase, after the component's name
+            comp, sep, rest = str(exc).partition(": ")
+            raise FmuError(f"{comp}: in initialization: {rest}" if sep else
+                           f"in initialization: {exc}") from None  # fmt: skip
+
+    def _stepper(self, ordered: list[_Slot], data: np.ndarray):
+        """(the compiled loop or None, the step function): the C loop where it can run the
+        system and is asked for or allowed, else the Python loop."""
+        unsupported = c_loop.unsupported(ordered)
+        if self.loop == "c" and unsupported:
+            raise MasterError(f"the C loop cannot run this system: {unsupported}")
+        fast = c_loop.load() if self.loop != "python" and not unsupported else None
+        if self.loop == "c" and fast is None:
+            raise MasterError("the C loop cannot be compiled here (no C compiler?)")
+        if not fast:
+            return None, self._python_steps
+        return fast, c_loop.stepper(fast, ordered, data, self.algorithm == "jacobi",
+                                      self.start_time, self.step_size, self.divergence_limit,
+                                      self._check_row, self.extrapolation != "none")  # fmt: skip
+
+    def _release(self, ordered: list[_Slot], error) -> None:
+        """Terminate each FMU and free it, or give it back to the pool (reset) when it ended
+        cleanly: without error, or diverged (its FMUs returned no error)."""
+        for s in ordered:
+            try:
+                s.fmu.terminate()
+                clean = error is None or isinstance(error, Divergence)
+            except FmuError:
+                clean = False
+            self.instances.give(s.fmu, clean) if self.instances else s.fmu.free()
+
+    def _progress(self, steps: int, progress: bool | TextIO) -> StepProgress | None:
         """The progress display on stderr (or the stream given), or None when not wanted."""
         if not progress:
             return None
         stream = sys.stderr if progress is True else progress
-        return _RunProgress(steps, self.parameter_set or "run", self.start_time, self.step_size,
+        return StepProgress(steps, self.parameter_set or "run", self.start_time, self.step_size,
                             stream)  # fmt: skip
 
     def _wire(self, ordered: list[_Slot]) -> None:
@@ -375,22 +388,3 @@ class Master:
             return None
         k = int(np.argmax(bad))
         return Divergence(float(t), names[k], float(row[k]), self.divergence_limit)
-
-
-class _RunProgress(Progress):
-    """A run's progress (util.progress: a bar on a terminal, plain periodic lines otherwise),
-    shown once it has taken more than a second, with the simulated time and real-time factor."""
-
-    DELAY, EVERY = 1.0, 10.0  # s: nothing before DELAY; in a log, a line every EVERY
-
-    def __init__(self, steps: int, name: str, t0: float, h: float, stream: TextIO) -> None:
-        super().__init__(steps, name, "step", stream=stream, delay=self.DELAY, every=self.EVERY)
-        self.t0, self.h = t0, h
-
-    def update_steps(self, i: int) -> None:
-        """i steps done."""
-        if not self.enabled:
-            return
-        elapsed = wallclock.perf_counter() - self.start
-        factor = i * self.h / elapsed if elapsed > 0 else 0.0
-        self.update(i, f"t={self.t0 + i * self.h:.2f} s, {factor:.1f}x real time")

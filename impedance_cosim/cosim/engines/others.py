@@ -126,17 +126,7 @@ def run_in_libcosim(
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
 
-    from impedance_cosim.cosim.ssp.read import read_ssp
-
-    sets: dict[str, list] = {}
-    if parameter_set is not None:
-        with tempfile.TemporaryDirectory(prefix="impcosim_libcosim_") as tmp:
-            sets = read_ssp(ssp_path, extract_to=Path(tmp)).parameter_sets
-        if parameter_set not in sets:
-            raise ValueError(
-                f"no parameter set {parameter_set!r} in {ssp_path} (have {list(sets)})"
-            )
-
+    params = _parameter_set(ssp_path, parameter_set)
     log_output_level(CosimLogLevel[log_level.upper()])
     try:
         execution = CosimExecution.from_ssp_file(str(ssp_path), step_size=h_ns)
@@ -148,21 +138,7 @@ def run_in_libcosim(
         for name, index in slaves.items()
     }
 
-    setters = {
-        CosimVariableType.REAL.value: execution.real_initial_value,
-        CosimVariableType.INTEGER.value: execution.integer_initial_value,
-        CosimVariableType.BOOLEAN.value: execution.boolean_initial_value,
-        CosimVariableType.STRING.value: execution.string_initial_value,
-    }
-    for p in sets.get(parameter_set, []) if parameter_set is not None else []:
-        component, name = p.name.split(".", 1)
-        v = variables.get(component, {}).get(name)
-        if v is None:
-            raise EngineError(f"parameter {p.name}: no such variable in libcosim's system")
-        if not setters[v.type](slaves[component], v.reference, typed_value(p.value, p.type)):
-            reason = get_last_error_message()
-            raise EngineError(f"parameter {p.name}: libcosim refused it: {reason}")
-
+    _set_initial_values(execution, slaves, variables, params)
     observer = CosimObserver.create_time_series(buffer_size=steps + 1)
     execution.add_observer(observer)
     outputs = [
@@ -184,6 +160,40 @@ def run_in_libcosim(
     for key, index, ref in outputs:
         result[key] = _samples(observer, index, ref, steps)
     return result
+
+
+def _parameter_set(ssp_path: str | Path, parameter_set: str | None) -> list:
+    """The parameters of the named set of the archive (read by our reader), [] for None."""
+    from impedance_cosim.cosim.ssp.read import read_ssp
+
+    if parameter_set is None:
+        return []
+    with tempfile.TemporaryDirectory(prefix="impcosim_libcosim_") as tmp:
+        sets = read_ssp(ssp_path, extract_to=Path(tmp)).parameter_sets
+    if parameter_set not in sets:
+        raise ValueError(f"no parameter set {parameter_set!r} in {ssp_path} (have {list(sets)})")
+    return sets[parameter_set]
+
+
+def _set_initial_values(execution, slaves: dict, variables: dict, params: list) -> None:
+    """Each parameter as libcosim's initial value of its variable (EngineError if refused)."""
+    from libcosimpy._internal import get_last_error_message
+    from libcosimpy.CosimEnums import CosimVariableType
+
+    setters = {
+        CosimVariableType.REAL.value: execution.real_initial_value,
+        CosimVariableType.INTEGER.value: execution.integer_initial_value,
+        CosimVariableType.BOOLEAN.value: execution.boolean_initial_value,
+        CosimVariableType.STRING.value: execution.string_initial_value,
+    }
+    for p in params:
+        component, name = p.name.split(".", 1)
+        v = variables.get(component, {}).get(name)
+        if v is None:
+            raise EngineError(f"parameter {p.name}: no such variable in libcosim's system")
+        if not setters[v.type](slaves[component], v.reference, typed_value(p.value, p.type)):
+            reason = get_last_error_message()
+            raise EngineError(f"parameter {p.name}: libcosim refused it: {reason}")
 
 
 # --- other engines' time grids and start values, for Master(step_times=..., zero_start_inputs=)

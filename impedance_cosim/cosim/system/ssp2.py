@@ -130,51 +130,9 @@ def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes
     elements = ET.SubElement(system, _q("ssd", "Elements"))
     used_units: set[str] = set()
     for comp in sorted(COMPONENTS, key=lambda c: SSD_ELEMENT_ORDER.index(c.name)):
-        spec = COMPONENTS2[comp.name]
-        el = ET.SubElement(
-            elements,
-            _q("ssd", "Component"),
-            {
-                "name": comp.name,
-                "source": spec.source,
-                "type": "application/x-fmu-sharedlibrary",
-                "implementation": spec.implementation,
-            },
-        )
-        connectors = ET.SubElement(el, _q("ssd", "Connectors"))
-        params = bound_parameters(comp.name)
-        for v in comp.model_class.variables():
-            if v.causality == "parameter" and v.name not in params:
-                continue
-            c = ET.SubElement(
-                connectors,
-                _q("ssd", "Connector"),
-                {"name": v.name, "kind": v.causality, "description": v.description},
-            )
-            _typed(c, "ssc", v)
-            if spec.clocked and v.causality in ("input", "output"):
-                ET.SubElement(c, _q("ssd", "Clock"), {"name": CLOCK})
-            if v.unit and v.type == "Real":
-                used_units.add(v.unit)
-        if spec.clocked:
-            c = ET.SubElement(
-                connectors,
-                _q("ssd", "Connector"),
-                {
-                    "name": CLOCK,
-                    "kind": "input",
-                    "description": "Input clock: a sample every sample_period s",
-                },
-            )
-            _clock_type(c)
-        bindings = ET.SubElement(el, _q("ssd", "ParameterBindings"))
-        ET.SubElement(
-            bindings,
-            _q("ssd", "ParameterBinding"),
-            {"source": f"resources/{ssv_name(scenario, comp.name)}"},
-        )
+        el = _component(elements, comp, scenario, used_units)
         if checksums:
-            _srmd(el, comp.name, spec, checksums[comp.name])
+            _srmd(el, comp.name, COMPONENTS2[comp.name], checksums[comp.name])
     connections = connections_element(system)
     ET.SubElement(
         connections,
@@ -185,6 +143,55 @@ def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes
     experiment_element(root)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def _component(elements: ET.Element, comp, scenario: str, used_units: set[str]) -> ET.Element:
+    """One Component element: its connectors (the clock's too when it is clocked) and its
+    parameter binding to the scenario's SSV; the Real units it uses are added to used_units."""
+    spec = COMPONENTS2[comp.name]
+    el = ET.SubElement(
+        elements,
+        _q("ssd", "Component"),
+        {
+            "name": comp.name,
+            "source": spec.source,
+            "type": "application/x-fmu-sharedlibrary",
+            "implementation": spec.implementation,
+        },
+    )
+    connectors = ET.SubElement(el, _q("ssd", "Connectors"))
+    params = bound_parameters(comp.name)
+    for v in comp.model_class.variables():
+        if v.causality == "parameter" and v.name not in params:
+            continue
+        c = ET.SubElement(
+            connectors,
+            _q("ssd", "Connector"),
+            {"name": v.name, "kind": v.causality, "description": v.description},
+        )
+        _typed(c, "ssc", v)
+        if spec.clocked and v.causality in ("input", "output"):
+            ET.SubElement(c, _q("ssd", "Clock"), {"name": CLOCK})
+        if v.unit and v.type == "Real":
+            used_units.add(v.unit)
+    if spec.clocked:
+        c = ET.SubElement(
+            connectors,
+            _q("ssd", "Connector"),
+            {
+                "name": CLOCK,
+                "kind": "input",
+                "description": "Input clock: a sample every sample_period s",
+            },
+        )
+        _clock_type(c)
+    bindings = ET.SubElement(el, _q("ssd", "ParameterBindings"))
+    ET.SubElement(
+        bindings,
+        _q("ssd", "ParameterBinding"),
+        {"source": f"resources/{ssv_name(scenario, comp.name)}"},
+    )
+    return el
 
 
 def _clock_type(connector: ET.Element) -> None:

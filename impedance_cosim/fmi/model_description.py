@@ -65,6 +65,32 @@ def model_description(
             ),
         },
     )
+    partials = _interfaces(root, model_name, needs_execution_tool, model_exchange, source_files)
+    used = sorted({v.unit for v in variables if v.unit})
+    unknown = [u for u in used if u not in QUANTITIES]
+    if unknown:
+        raise ValueError(f"units {unknown} have no quantity in QUANTITIES")
+    add_unit_definitions(root, used)
+    _type_definitions(root, used, variables)
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(cats, "Category", {"name": name, "description": text})
+    ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
+    _model_variables(root, variables, index)
+    _model_structure(root, variables, index, output_dependencies, model_exchange, partials)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _interfaces(
+    root: ET.Element,
+    model_name: str,
+    needs_execution_tool: bool,
+    model_exchange: ModelExchange | None,
+    source_files: list[str] | None,
+) -> Partials | None:
+    """The ModelExchange (when given) and CoSimulation elements, with their source files; the
+    model's Partials, if any (they add the directional and output derivatives)."""
     common = {
         "modelIdentifier": model_name,
         "needsExecutionTool": xml_value(needs_execution_tool),
@@ -102,16 +128,11 @@ def model_description(
         files = ET.SubElement(element, "SourceFiles")
         for name in source_files or ():
             ET.SubElement(files, "File", {"name": name})
-    used = sorted({v.unit for v in variables if v.unit})
-    unknown = [u for u in used if u not in QUANTITIES]
-    if unknown:
-        raise ValueError(f"units {unknown} have no quantity in QUANTITIES")
-    add_unit_definitions(root, used)
-    _type_definitions(root, used, variables)
-    cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(cats, "Category", {"name": name, "description": text})
-    ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
+    return partials
+
+
+def _model_variables(root: ET.Element, variables: list[Variable], index: dict[str, int]) -> None:
+    """ModelVariables: one ScalarVariable per variable, value reference = its position."""
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(variables):
         attrs = {
@@ -143,6 +164,18 @@ def model_description(
         if v.causality not in ("output", "local"):
             type_attrs["start"] = xml_value(v.start)
         ET.SubElement(sv, v.type, type_attrs)
+
+
+def _model_structure(
+    root: ET.Element,
+    variables: list[Variable],
+    index: dict[str, int],
+    output_dependencies: str | None,
+    model_exchange: ModelExchange | None,
+    partials: Partials | None,
+) -> None:
+    """ModelStructure: the outputs with their dependencies, the state derivatives, the initial
+    unknowns."""
     ms = ET.SubElement(root, "ModelStructure")
     outs = ET.SubElement(ms, "Outputs")
     if output_dependencies == "" and model_exchange:
@@ -170,8 +203,6 @@ def model_description(
     for i, v in enumerate(variables):
         if v.causality == "output" or v.derivative:
             ET.SubElement(inits, "Unknown", {"index": str(i + 1)})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
 def exact_dependencies(

@@ -15,6 +15,7 @@ from impedance_cosim.fmi.variables import (
     METADATA,
     SAMPLED_INPUTS,
     ModelExchange,
+    Partials,
     Variable,
     derivative_variables,
 )
@@ -90,6 +91,70 @@ def model_description3(
             "variableNamingConvention": naming,
         },
     )
+    partials = _interfaces3(root, model_name, model_exchange, clock, early_return)
+    used = sorted({v.unit for v in table if v.unit} | {"s"})
+    add_unit_definitions(root, used)
+    _type_definitions(root, [u for u in used if u in QUANTITIES], table)
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
+    ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
+    mv = ET.SubElement(root, "ModelVariables")
+    ET.SubElement(
+        mv,
+        "Float64",
+        {
+            "name": "time",
+            "valueReference": str(ext.time),
+            "description": "Simulation time",
+            "causality": "independent",
+            "variability": "continuous",
+            "unit": "s",
+        },
+    )
+    for vr, v in enumerate(table):
+        _variable3(mv, vr, v, vr_of, ext.clock if clock else None, early_return)
+    for i, vr in enumerate(ext.indicators):
+        ET.SubElement(
+            mv,
+            "Float64",
+            {
+                "name": f"event_indicator{i + 1}",
+                "valueReference": str(vr),
+                "description": "Contact switching function (Model Exchange event indicator)",
+                "causality": "local",
+                "variability": "continuous",
+                "initial": "calculated",
+            },
+        )
+    if clock:
+        ET.SubElement(
+            mv,
+            "Clock",
+            {
+                "name": clock.name,
+                "valueReference": str(ext.clock),
+                "description": clock.description,
+                "causality": "input",
+                "variability": "discrete",
+                "intervalVariability": "fixed",
+                "priority": "0",
+            },
+        )
+    _model_structure3(root, table, vr_of, ext, output_dependencies, model_exchange, clock, partials)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _interfaces3(
+    root: ET.Element,
+    model_name: str,
+    model_exchange: ModelExchange | None,
+    clock: SampleClock | None,
+    early_return: bool,
+) -> Partials | None:
+    """ScheduledExecution (with a clock), else ModelExchange (when given) and CoSimulation; the
+    model's Partials, if any (they add the directional and output derivatives)."""
     common = {
         "modelIdentifier": model_name,
         "needsExecutionTool": "false",
@@ -124,89 +189,67 @@ def model_description3(
                 **orders,
             },
         )
-    used = sorted({v.unit for v in table if v.unit} | {"s"})
-    add_unit_definitions(root, used)
-    _type_definitions(root, [u for u in used if u in QUANTITIES], table)
-    cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
-    ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
-    mv = ET.SubElement(root, "ModelVariables")
-    ET.SubElement(
-        mv,
-        "Float64",
-        {
-            "name": "time",
-            "valueReference": str(ext.time),
-            "description": "Simulation time",
-            "causality": "independent",
-            "variability": "continuous",
-            "unit": "s",
-        },
-    )
-    clocked = {"clocks": str(ext.clock)} if clock else {}
-    for vr, v in enumerate(table):
-        attrs = {
-            "name": v.name,
-            "valueReference": str(vr),
-            "description": v.description,
-            "causality": v.causality,
-            "variability": v.fmi_variability,
-        }
-        if clock and v.causality in ("input", "output"):
-            attrs.update(clocked, variability="discrete")
-        if v.causality in ("output", "local"):
-            attrs["initial"] = "calculated"
-        if early_return and v.causality == "output":  # readable in the intermediate update
-            attrs["intermediateUpdate"] = "true"
-        if v.derivative:
-            attrs["derivative"] = str(vr_of[v.derivative])
-        enumeration = getattr(v, "enumeration", None)
-        if enumeration:  # an Int32 of the enumeration's declared type (as in FMI 2.0)
-            attrs.update(declaredType=enumeration.name, min="1", max=str(len(enumeration.items)))
-        if v.unit and v.type == "Real":
-            if v.unit in QUANTITIES:
-                attrs["declaredType"] = QUANTITIES[v.unit]
-            attrs["unit"] = v.unit
-            if v.unit in DISPLAY_UNITS:
-                attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
-        if v.min is not None:
-            attrs["min"] = xml_value(v.min)
-        if v.max is not None:
-            attrs["max"] = xml_value(v.max)
-        start = v.causality not in ("output", "local")
-        if start and v.type != "String":
-            attrs["start"] = xml_value(v.start)
-        element = ET.SubElement(mv, FMI3_TYPES[v.type], attrs)
-        if start and v.type == "String":
-            ET.SubElement(element, "Start", {"value": str(v.start)})
-    for i, vr in enumerate(ext.indicators):
-        ET.SubElement(
-            mv,
-            "Float64",
-            {
-                "name": f"event_indicator{i + 1}",
-                "valueReference": str(vr),
-                "description": "Contact switching function (Model Exchange event indicator)",
-                "causality": "local",
-                "variability": "continuous",
-                "initial": "calculated",
-            },
-        )
-    if clock:
-        ET.SubElement(
-            mv,
-            "Clock",
-            {
-                "name": clock.name,
-                "valueReference": str(ext.clock),
-                "description": clock.description,
-                "causality": "input",
-                "variability": "discrete",
-                "intervalVariability": "fixed",
-                "priority": "0",
-            },
-        )
+    return partials
+
+
+def _variable3(
+    mv: ET.Element,
+    vr: int,
+    v: Variable,
+    vr_of: dict[str, int],
+    clock: int | None,
+    early_return: bool,
+) -> None:
+    """One variable of the table as its FMI 3.0 type element (clock: the clock's value
+    reference, which clocks the inputs and outputs)."""
+    attrs = {
+        "name": v.name,
+        "valueReference": str(vr),
+        "description": v.description,
+        "causality": v.causality,
+        "variability": v.fmi_variability,
+    }
+    if clock is not None and v.causality in ("input", "output"):
+        attrs.update(clocks=str(clock), variability="discrete")
+    if v.causality in ("output", "local"):
+        attrs["initial"] = "calculated"
+    if early_return and v.causality == "output":  # readable in the intermediate update
+        attrs["intermediateUpdate"] = "true"
+    if v.derivative:
+        attrs["derivative"] = str(vr_of[v.derivative])
+    enumeration = getattr(v, "enumeration", None)
+    if enumeration:  # an Int32 of the enumeration's declared type (as in FMI 2.0)
+        attrs.update(declaredType=enumeration.name, min="1", max=str(len(enumeration.items)))
+    if v.unit and v.type == "Real":
+        if v.unit in QUANTITIES:
+            attrs["declaredType"] = QUANTITIES[v.unit]
+        attrs["unit"] = v.unit
+        if v.unit in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
+    if v.min is not None:
+        attrs["min"] = xml_value(v.min)
+    if v.max is not None:
+        attrs["max"] = xml_value(v.max)
+    start = v.causality not in ("output", "local")
+    if start and v.type != "String":
+        attrs["start"] = xml_value(v.start)
+    element = ET.SubElement(mv, FMI3_TYPES[v.type], attrs)
+    if start and v.type == "String":
+        ET.SubElement(element, "Start", {"value": str(v.start)})
+
+
+def _model_structure3(
+    root: ET.Element,
+    table: list[Variable],
+    vr_of: dict[str, int],
+    ext,
+    output_dependencies: str | None,
+    model_exchange: ModelExchange | None,
+    clock: SampleClock | None,
+    partials: Partials | None,
+) -> None:
+    """ModelStructure: the outputs with their dependencies and, without a clock, the state
+    derivatives, the initial unknowns and the event indicators."""
     ms = ET.SubElement(root, "ModelStructure")
     states = model_exchange.states if model_exchange else ()
     if output_dependencies == "" and states and not clock:
@@ -232,8 +275,6 @@ def model_description3(
     if not clock:
         for vr in ext.indicators:
             ET.SubElement(ms, "EventIndicator", {"valueReference": str(vr)})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
 def _type_definitions(root: ET.Element, units: list[str], table: list[Variable]) -> None:

@@ -114,33 +114,7 @@ def model_description3(
     )
     for vr, v in enumerate(table):
         _variable3(mv, vr, v, vr_of, ext.clock if clock else None, early_return)
-    for i, vr in enumerate(ext.indicators):
-        ET.SubElement(
-            mv,
-            "Float64",
-            {
-                "name": f"event_indicator{i + 1}",
-                "valueReference": str(vr),
-                "description": "Contact switching function (Model Exchange event indicator)",
-                "causality": "local",
-                "variability": "continuous",
-                "initial": "calculated",
-            },
-        )
-    if clock:
-        ET.SubElement(
-            mv,
-            "Clock",
-            {
-                "name": clock.name,
-                "valueReference": str(ext.clock),
-                "description": clock.description,
-                "causality": "input",
-                "variability": "discrete",
-                "intervalVariability": "fixed",
-                "priority": "0",
-            },
-        )
+    _extra_variables3(mv, ext, clock)
     _model_structure3(root, table, vr_of, ext, output_dependencies, model_exchange, clock, partials)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
@@ -236,6 +210,37 @@ def _variable3(
     element = ET.SubElement(mv, FMI3_TYPES[v.type], attrs)
     if start and v.type == "String":
         ET.SubElement(element, "Start", {"value": str(v.start)})
+
+
+def _extra_variables3(mv: ET.Element, ext, clock: SampleClock | None) -> None:
+    """The variables past the table: the event indicators and the clock, if any."""
+    for i, vr in enumerate(ext.indicators):
+        ET.SubElement(
+            mv,
+            "Float64",
+            {
+                "name": f"event_indicator{i + 1}",
+                "valueReference": str(vr),
+                "description": "Contact switching function (Model Exchange event indicator)",
+                "causality": "local",
+                "variability": "continuous",
+                "initial": "calculated",
+            },
+        )
+    if clock:
+        ET.SubElement(
+            mv,
+            "Clock",
+            {
+                "name": clock.name,
+                "valueReference": str(ext.clock),
+                "description": clock.description,
+                "causality": "input",
+                "variability": "discrete",
+                "intervalVariability": "fixed",
+                "priority": "0",
+            },
+        )
 
 
 def _model_structure3(

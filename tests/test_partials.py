@@ -1,5 +1,5 @@
-"""Exact directional derivatives of the native plant (native/plant/model.c model_partials, from the
-sympy derivation's arm_partials.c): against central finite differences of the FMU's own
+"""Exact directional derivatives of the native plant (native/plant/model_me.c model_partials, from
+the sympy derivation's arm_partials.c): against central finite differences of the FMU's own
 derivatives and outputs at 400 random states, free and in contact, under FMI 2.0 and 3.0 Model
 Exchange; in co-simulation the knowns are the torques (state derivatives against ME's, outputs
 zero); the ModelStructure's dependencies and dependenciesKind against the numbers."""

@@ -190,11 +190,10 @@ NATIVE = REPO / "native"
 # model_partials.h), the instance core, the arm, the integrator
 NATIVE_SHARED = ("glue.h", "instance.h", "instance.c", "instance_values.c", "instance_state.c",
                  "instance_me.c", "model_me.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
-                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h",
+                 "ode.c", "ode.h", "pyrandom.c", "pyrandom.h", "wall.c", "wall.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",
                  "model_partials.h")  # fmt: skip
 FMI2_GLUE = ("fmi2_glue.c", "fmi2_me.c")  # the exported fmi2* functions
-NATIVE_MODEL = ("config.h", "model.h", "model.c")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 
@@ -206,11 +205,11 @@ def _native_sources(spec: FmuSpec, glue: tuple[str, ...] = FMI2_GLUE) -> dict[st
     files = {}
     for name in (*NATIVE_SHARED, *glue):
         path = NATIVE / "src" / name
-        if name.startswith(("ode", "pyrandom")) and spec.key != "plant":
+        if name.startswith(("ode", "pyrandom", "wall")) and spec.key != "plant":
             continue
         files[name] = path.read_bytes()
-    for name in NATIVE_MODEL:
-        files[name] = (NATIVE / spec.key / name).read_bytes()
+    for path in sorted((NATIVE / spec.key).glob("*.[ch]")):  # config.h, model.h, model.c, ...
+        files[path.name] = path.read_bytes()
     headers = Path(fmpy.__file__).parent / "c-code"
     for name in FMI_HEADERS:
         files[name] = (headers / name).read_bytes()

@@ -125,6 +125,9 @@ def _sources(scenario: str, glue: tuple[str, ...] = FMI2_GLUE) -> dict[str, byte
     for part in PARTS:
         for name in ("config.h", "model.h", "model.c"):
             files[f"{part}_{name}"] = (NATIVE / part / name).read_bytes()
+        own = NATIVE / part / f"{part}.h"  # what the part's model files share, if they are two
+        if own.is_file():
+            files[own.name] = own.read_bytes()
     for name in OWN_SOURCES:
         files[name] = (NATIVE / "closedloop" / name).read_bytes()
     files["config.h"] = c_config_closed_loop(scenario).encode()

@@ -123,15 +123,16 @@ def _compile(src: list[Path], out: Path, werror: bool) -> None:
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    """model.c (warning-free) + arm_terms.c + the shim, as a shared library."""
+    """model.c (warning-free) + arm_terms.c + pyrepr.c + the shim, as a shared library."""
     tmp = tmp_path_factory.mktemp("native_controller")
     shim = tmp / "shim.c"
     shim.write_text(SHIM)
-    objs = [tmp / "model.o", tmp / "arm_terms.o", tmp / "shim.o"]
+    objs = [tmp / "model.o", tmp / "arm_terms.o", tmp / "shim.o", tmp / "pyrepr.o"]
     try:
         _compile([ROOT / "native" / "controller" / "model.c"], objs[0], werror=True)
         _compile([ROOT / "native" / "src" / "arm_terms.c"], objs[1], werror=False)
         _compile([shim], objs[2], werror=True)
+        _compile([ROOT / "native" / "src" / "pyrepr.c"], objs[3], werror=True)
     except subprocess.CalledProcessError as exc:
         pytest.fail(f"compilation failed:\n{exc.stderr}")
     so = tmp / "controller_test.so"

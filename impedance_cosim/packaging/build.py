@@ -191,6 +191,7 @@ NATIVE = REPO / "native"
 NATIVE_SHARED = ("glue.h", "instance.h", "instance.c", "instance_values.c", "instance_state.c",
                  "instance_me.c", "model_me.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
                  "ode.c", "ode.h", "pyrandom.c", "pyrandom.h", "wall.c", "wall.h",
+                 "pyrepr.c", "pyrepr.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",
                  "model_partials.h")  # fmt: skip
 FMI2_GLUE = ("fmi2_glue.c", "fmi2_me.c")  # the exported fmi2* functions

@@ -2,7 +2,7 @@
  * (eq. 10), sampled at sample_period with its outputs held between samples.
  *
  * A transcription of controller_model/model.py (and of Arm.forward_dynamics, jacobian_det and
- * friction in impedance_cosim/physics/arm.py), operation for operation: the same temporaries, the same
+ * friction in physics/arm.py), operation for operation: the same temporaries, the same
  * order of terms and the same parenthesisation as Python's left-to-right evaluation, the same libm
  * calls, so that with -ffp-contract=off (no fused multiply-add) and without -ffast-math it computes
  * the same numbers as the Python FMU, bit for bit. Error messages are the Python ones, floats
@@ -16,31 +16,20 @@
 #include "arm.h"
 #include "arm_terms.h"
 #include "glue.h"
+#include "controller.h" /* Params, the functions model_me.c shares */
+#include "pyrepr.h"
 #include "linalg3.h"
-#include "model_me.h"
 
 #define PI 3.141592653589793 /* math.pi */
 #define TWO_PI (2.0 * PI)
 #define SINGULAR_TOL 1e-6 /* |det J| below SINGULAR_TOL * a1 * a2 is singular */
-#define TIME_TOL 1e-9     /* sample-time comparisons, relative to the sample period */
 #define N_OUTPUTS 24      /* VR_tau1 .. VR_e_phi, contiguous and in ControllerModel's order */
 #define SINGULAR_POSE 2   /* impedance_terms' return when J is singular (eq. 10 undefined) */
 
 static const char *const VELOCITY_SOURCES[3] = {"observer", "difference", "measured"};
 /* observer_discretization (OBSERVER_DISCRETIZATIONS) */
 static const char *const DISCRETIZATIONS[3] = {"euler", "implicit", "exponential"};
-enum { OBS_EULER = 0, OBS_IMPLICIT = 1, OBS_EXPONENTIAL = 2 };
-
-typedef struct {
-    ArmParams arm; /* the controller's own model of the arm */
-    double traj_cx, traj_cy, traj_ax, traj_ay, traj_f, traj_phi, wall_x, wall_depth;
-    double K[3], G[3], B[3], yhat0[3], tau_max[3];
-    double ts;
-    int limit_torque;
-    int discretization; /* OBS_*, -1 if unknown (refused by model_initialize) */
-} Params;
-
-static void read_params(const Data *d, Params *p)
+void controller_read_params(const Data *d, Params *p)
 {
     const double *r = d->r;
     p->discretization = -1;
@@ -94,115 +83,6 @@ static void read_params(const Data *d, Params *p)
     p->tau_max[2] = r[VR_tau_max3];
     p->ts = r[VR_sample_period];
     p->limit_torque = d->i[VR_limit_torque] != 0;
-}
-
-/* --- messages: Python's repr of a float and of a str ------------------------------------------ */
-
-/* repr(x): the shortest digits that round-trip, fixed notation for 1e-4 <= |x| < 1e16 (with a
- * ".0" when integral), else d.ddde+XX. */
-static void float_repr(double x, char *buf, size_t size)
-{
-    char tmp[40], digits[24];
-    const char *c;
-    int nd = 0, exp10, decpt, p, k;
-    size_t n = 0;
-    if (isnan(x)) {
-        snprintf(buf, size, "nan");
-        return;
-    }
-    if (isinf(x)) {
-        snprintf(buf, size, x < 0.0 ? "-inf" : "inf");
-        return;
-    }
-    for (p = 1; p < 17; p++) {
-        snprintf(tmp, sizeof tmp, "%.*e", p - 1, x);
-        if (strtod(tmp, NULL) == x) {
-            break;
-        }
-    }
-    snprintf(tmp, sizeof tmp, "%.*e", p - 1, x); /* [-]d[.ddd]e(+|-)XX */
-    c = tmp;
-    if (*c == '-') {
-        c++;
-    }
-    for (; *c != 'e'; c++) {
-        if (*c != '.') {
-            digits[nd++] = *c;
-        }
-    }
-    exp10 = atoi(c + 1);
-    while (nd > 1 && digits[nd - 1] == '0') {
-        nd--;
-    }
-    digits[nd] = '\0';
-    decpt = exp10 + 1; /* x = 0.digits * 10^decpt */
-    char out[64];
-    if (tmp[0] == '-') {
-        out[n++] = '-';
-    }
-    if (decpt <= -4 || decpt > 16) {
-        out[n++] = digits[0];
-        if (nd > 1) {
-            out[n++] = '.';
-            for (k = 1; k < nd; k++) {
-                out[n++] = digits[k];
-            }
-        }
-        snprintf(out + n, sizeof out - n, "e%c%02d", exp10 < 0 ? '-' : '+', abs(exp10));
-    } else if (decpt <= 0) {
-        out[n++] = '0';
-        out[n++] = '.';
-        for (k = 0; k < -decpt; k++) {
-            out[n++] = '0';
-        }
-        for (k = 0; k < nd; k++) {
-            out[n++] = digits[k];
-        }
-        out[n] = '\0';
-    } else {
-        for (k = 0; k < nd || k < decpt; k++) {
-            if (k == decpt) {
-                out[n++] = '.';
-            }
-            out[n++] = k < nd ? digits[k] : '0';
-        }
-        if (nd <= decpt) {
-            out[n++] = '.';
-            out[n++] = '0';
-        }
-        out[n] = '\0';
-    }
-    snprintf(buf, size, "%s", out);
-}
-
-/* repr(s) of a str (ASCII escapes; other bytes copied as they are) */
-static void str_repr(const char *s, char *buf, size_t size)
-{
-    char out[4 * STRING_MAX + 3];
-    size_t n = 0, k, len = 0;
-    char quote;
-    while (len < STRING_MAX && s[len]) {
-        len++;
-    }
-    quote = memchr(s, '\'', len) && !memchr(s, '"', len) ? '"' : '\'';
-    out[n++] = quote;
-    for (k = 0; k < len; k++) {
-        const unsigned char ch = (unsigned char)s[k];
-        if (ch == (unsigned char)quote || ch == '\\') {
-            out[n++] = '\\';
-            out[n++] = (char)ch;
-        } else if (ch == '\n' || ch == '\r' || ch == '\t') {
-            out[n++] = '\\';
-            out[n++] = ch == '\n' ? 'n' : ch == '\r' ? 'r' : 't';
-        } else if (ch < 0x20 || ch == 0x7f) {
-            n += (size_t)sprintf(out + n, "\\x%02x", ch);
-        } else {
-            out[n++] = (char)ch;
-        }
-    }
-    out[n++] = quote;
-    out[n] = '\0';
-    snprintf(buf, size, "%s", out);
 }
 
 /* --- virtual trajectory, observer, impedance law --------------------------------------------- */
@@ -342,7 +222,7 @@ static void gravity_hold_terms(const Params *p, const double q[3], const double 
 /* --- the model ------------------------------------------------------------------------------- */
 
 /* ControllerModel._split: the inputs, after checking they are finite (qd_meas only when used). */
-static int split_inputs(const Data *d, double q[3], double f[3], double qd_meas[3], char *msg)
+int controller_split_inputs(const Data *d, double q[3], double f[3], double qd_meas[3], char *msg)
 {
     const int n = d->m.velocity_source == SOURCE_MEASURED ? 9 : 6;
     int k;
@@ -350,7 +230,7 @@ static int split_inputs(const Data *d, double q[3], double f[3], double qd_meas[
         const double v = d->r[VR_q1 + k];
         if (!(v - v == 0.0)) { /* false for NaN and +-inf */
             char buf[32];
-            float_repr(v, buf, sizeof buf);
+            py_float_repr(v, buf, sizeof buf);
             return fail(msg, "input %s is not finite (%s)", VARS[VR_q1 + k].name, buf);
         }
     }
@@ -365,8 +245,8 @@ static int split_inputs(const Data *d, double q[3], double f[3], double qd_meas[
 /* ControllerModel._sample: sample k from the state in d->m (the previous sample's) and this
  * sample's inputs; on success, updates d->m and writes the outputs to d->r. law 0: gravity
  * compensation instead of eq. (10). Returns SINGULAR_POSE when eq. (10) is undefined. */
-static int take_sample(Data *d, const Params *p, int64_t k, const double q[3], const double f[3],
-                       const double qd_meas[3], int law, char *msg)
+int controller_take_sample(Data *d, const Params *p, int64_t k, const double q[3],
+                           const double f[3], const double qd_meas[3], int law, char *msg)
 {
     ModelState *m = &d->m;
     const double ts = p->ts;
@@ -431,7 +311,7 @@ static int check_positive(const Data *d, char *msg)
     for (size_t k = 0; k < sizeof positive / sizeof positive[0]; k++) {
         const double value = d->r[positive[k]];
         if (isfinite(value) && !(value > 0.0)) {
-            float_repr(value, buf, sizeof buf);
+            py_float_repr(value, buf, sizeof buf);
             return fail(msg, "parameter %s must be > 0 (got %s)", VARS[positive[k]].name, buf);
         }
     }
@@ -449,11 +329,11 @@ int model_initialize(Data *d, char *msg)
     double q[3], f[3], qd_meas[3];
     char buf[2][32];
     const int source = d->i[VR_velocity_source];
-    read_params(d, &p);
+    controller_read_params(d, &p);
     /* ArmParams.validate (the glue has checked finiteness and minimums) */
     if (p.arm.a1 <= 0.0 || p.arm.a2 <= 0.0) {
-        float_repr(p.arm.a1, buf[0], sizeof buf[0]);
-        float_repr(p.arm.a2, buf[1], sizeof buf[1]);
+        py_float_repr(p.arm.a1, buf[0], sizeof buf[0]);
+        py_float_repr(p.arm.a2, buf[1], sizeof buf[1]);
         return fail(msg, "link lengths a1, a2 must be > 0 (got a1=%s, a2=%s)", buf[0], buf[1]);
     }
     /* ControllerParams.validate */
@@ -467,7 +347,7 @@ int model_initialize(Data *d, char *msg)
     }
     if (p.discretization < 0) {
         char text[4 * STRING_MAX + 3];
-        str_repr(d->s[VR_observer_discretization], text, sizeof text);
+        py_str_repr(d->s[VR_observer_discretization], STRING_MAX, text, sizeof text);
         return fail(msg,
                     "parameter observer_discretization must be one of %s, %s, %s (got %s)",
                     DISCRETIZATIONS[0], DISCRETIZATIONS[1], DISCRETIZATIONS[2], text);
@@ -475,19 +355,19 @@ int model_initialize(Data *d, char *msg)
     memset(m, 0, sizeof *m);
     m->velocity_source = source - 1;
     m->start_time = d->start_time;
-    if (split_inputs(d, q, f, qd_meas, msg)) {
+    if (controller_split_inputs(d, q, f, qd_meas, msg)) {
         return 1;
     }
     /* Sample 0, from the inputs at initialization (previous sample: zeros, unused at k = 0).
      * Any finite inputs initialize: at a singular pose, gravity compensation only, and the
      * message (a warning: the glue logs a message left by a successful model_initialize). */
     {
-        const int r = take_sample(d, &p, 0, q, f, qd_meas, 1, msg);
+        const int r = controller_take_sample(d, &p, 0, q, f, qd_meas, 1, msg);
         if (r == SINGULAR_POSE) {
             char reason[MSG_MAX];
             snprintf(reason, sizeof reason, "%s", msg);
-            float_repr(d->start_time, buf[0], sizeof buf[0]);
-            if (take_sample(d, &p, 0, q, f, qd_meas, 0, msg)) {
+            py_float_repr(d->start_time, buf[0], sizeof buf[0]);
+            if (controller_take_sample(d, &p, 0, q, f, qd_meas, 0, msg)) {
                 return 1;
             }
             snprintf(msg, MSG_MAX,
@@ -511,12 +391,12 @@ int model_step(Data *d, double t, double h, char *msg)
     double q[3], f[3], qd_meas[3], tol, t_end;
     int64_t k, held = 0;
     char buf[2][32];
-    read_params(d, &p);
-    if (split_inputs(d, q, f, qd_meas, msg)) {
+    controller_read_params(d, &p);
+    if (controller_split_inputs(d, q, f, qd_meas, msg)) {
         return 1;
     }
     if (!(h > 0.0)) {
-        float_repr(h, buf[0], sizeof buf[0]);
+        py_float_repr(h, buf[0], sizeof buf[0]);
         return fail(msg, "communication step must be > 0 (got %s)", buf[0]);
     }
     if (isinf(h)) {
@@ -526,8 +406,8 @@ int model_step(Data *d, double t, double h, char *msg)
         const double at = fabs(t);
         const double scale = at > 1.0 ? at : 1.0; /* max(1.0, abs(t)) */
         if (fabs(t - m->t) > 1e-9 * scale) {
-            float_repr(t, buf[0], sizeof buf[0]);
-            float_repr(m->t, buf[1], sizeof buf[1]);
+            py_float_repr(t, buf[0], sizeof buf[0]);
+            py_float_repr(m->t, buf[1], sizeof buf[1]);
             return fail(msg, "doStep at t=%s, but the controller is at t=%s", buf[0], buf[1]);
         }
     }
@@ -536,8 +416,8 @@ int model_step(Data *d, double t, double h, char *msg)
     {
         const int n_max = d->i[VR_max_samples_per_step];
         if (m->start_time + (double)(m->k_next + n_max) * p.ts < t_end - tol) {
-            float_repr(h, buf[0], sizeof buf[0]); /* sample k_next + n_max would be taken */
-            float_repr(t, buf[1], sizeof buf[1]);
+            py_float_repr(h, buf[0], sizeof buf[0]); /* sample k_next + n_max would be taken */
+            py_float_repr(t, buf[1], sizeof buf[1]);
             return fail(msg,
                         "a communication step of %s s from t=%s would take more than %d samples"
                         " (parameter max_samples_per_step): take a smaller step",
@@ -550,7 +430,7 @@ int model_step(Data *d, double t, double h, char *msg)
         if (m->start_time + (double)k * p.ts > t + tol) {
             held += 1; /* strictly inside the step: the inputs at t are reused */
         }
-        if (take_sample(d, &p, k, q, f, qd_meas, 1, msg)) {
+        if (controller_take_sample(d, &p, k, q, f, qd_meas, 1, msg)) {
             return 1;
         }
     }
@@ -599,83 +479,3 @@ const StateReals MODEL_STATE_REALS[] = {
     {"controller f_prev", offsetof(ModelState, f_prev), 3},
 };
 const int N_MODEL_STATE_REALS = (int)(sizeof MODEL_STATE_REALS / sizeof MODEL_STATE_REALS[0]);
-
-/* --- Model Exchange (model_me.h) --------------------------------------------------------------
- * A sampled-data model: no continuous states and no event indicators. Each sample instant
- * t_k = start_time + k * sample_period is a time event; at it the sample is taken from the
- * inputs the host has set (take_sample, as in model_step), and the outputs hold until the next. */
-
-int model_me_check(const Data *d, char *msg)
-{
-    (void)d;
-    (void)msg;
-    return 0;
-}
-
-void model_me_get_states(const Data *d, double x[])
-{
-    (void)d;
-    (void)x;
-}
-
-void model_me_set_states(Data *d, const double x[])
-{
-    (void)d;
-    (void)x;
-}
-
-int model_me_evaluate(Data *d, char *msg)
-{
-    (void)d; /* the outputs are the held sample, written by take_sample */
-    (void)msg;
-    return 0;
-}
-
-int model_me_event_indicators(const Data *d, double z[], char *msg)
-{
-    (void)d;
-    (void)z;
-    (void)msg;
-    return 0;
-}
-
-int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
-{
-    ModelState *m = &d->m;
-    Params p;
-    double q[3], f[3], qd_meas[3], tol;
-    int64_t k;
-    read_params(d, &p);
-    tol = TIME_TOL * p.ts;
-    if (m->start_time + (double)m->k_next * p.ts <= t + tol) {
-        const int n_max = d->i[VR_max_samples_per_step];
-        if (m->start_time + (double)(m->k_next + n_max) * p.ts <= t + tol) {
-            char buf[2][32]; /* sample k_next + n_max is due: the host skipped that many */
-            float_repr(t, buf[0], sizeof buf[0]);
-            float_repr(m->t, buf[1], sizeof buf[1]);
-            return fail(msg,
-                        "an event at t=%s from t=%s would take more than %d samples (parameter"
-                        " max_samples_per_step): the host skipped the time events between",
-                        buf[0], buf[1], n_max);
-        }
-        if (split_inputs(d, q, f, qd_meas, msg)) {
-            return 1;
-        }
-        /* every sample due by t (more than one only if the host skipped a time event: those
-         * use the inputs at t, as model_step does inside a step) */
-        for (k = m->k_next; m->start_time + (double)k * p.ts <= t + tol; k++) {
-            if (m->start_time + (double)k * p.ts < t - tol) {
-                m->held_input_samples += 1;
-            }
-            if (take_sample(d, &p, k, q, f, qd_meas, 1, msg)) {
-                return 1;
-            }
-        }
-        m->k_next = k;
-        ev->changed = 1;
-    }
-    m->t = t;
-    ev->next_defined = 1;
-    ev->next = m->start_time + (double)m->k_next * p.ts;
-    return 0;
-}

@@ -17,6 +17,7 @@
 #include "linalg3.h"
 #include "ode.h"
 #include "pyrandom.h"
+#include "pyrepr.h"
 
 #define H0 1e-3            /* s, the integrator's first step guess */
 #define MAX_SWITCHES 1000  /* contact mode switches per communication step */

@@ -4,7 +4,7 @@
 #include <stdio.h>
 
 #include "ode.h"
-#include "pyrandom.h" /* py_float_repr, for messages like the Python ones */
+#include "pyrepr.h" /* py_float_repr, for messages like the Python ones */
 
 /* Dormand & Prince (1980) RK5(4)7M tableau. */
 static const double A2 = 1.0 / 5.0;

@@ -1,6 +1,6 @@
 /* CPython compatibility for the native plant: random.Random (MT19937) seeded from an int and its
  * gauss() method, reproduced bit for bit (CPython 3.11, Modules/_randommodule.c and
- * Lib/random.py), and repr(float) for messages that read like the Python FMU's.
+ * Lib/random.py).
  *
  * The generator is plain data (no pointers), so it can live in a ModelState that the FMU glue
  * copies with memcpy for fmi2GetFMUstate / fmi2SetFMUstate. */
@@ -27,8 +27,5 @@ double pyrandom_random(PyRandom *r);
 
 /* random.Random.gauss(mu, sigma). */
 double pyrandom_gauss(PyRandom *r, double mu, double sigma);
-
-/* repr(x) of a Python float: shortest round-trip digits, "1.0", "1e-05", "nan", "-inf". */
-void py_float_repr(double x, char *buf, size_t size);
 
 #endif

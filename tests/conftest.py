@@ -113,7 +113,7 @@ def contact_torques(seconds: float, parameters: dict | None = None) -> list[tupl
 @pytest.fixture(scope="session")
 def fmi3_dir(fmu_dir: Path, native_dir: Path) -> Path:
     """The FMI 3.0 native FMUs (fmus/fmi3/) and PaperScenario-fmi3.ssp next to the others."""
-    from impedance_cosim.packaging.build3 import build_fmi3
+    from impedance_cosim.packaging.build_fmi3 import build_fmi3
 
     build_fmi3(fmu_dir)
     return fmu_dir / "fmi3"

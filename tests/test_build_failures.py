@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from impedance_cosim.packaging import build3, toolchains
+from impedance_cosim.packaging import build_fmi3, toolchains
 from impedance_cosim.packaging.build import FMUS, build_native_fmu
 from impedance_cosim.packaging.build_all import STAGE_PREFIX, build_all
 
@@ -149,7 +149,7 @@ def test_a_failed_build_leaves_the_folder_as_it_was(tmp_path, monkeypatch, earli
     def fail(*args, **kwargs):
         raise OSError(28, "No space left on device (injected)")
 
-    monkeypatch.setattr(build3, "build_ssp", fail)
+    monkeypatch.setattr(build_fmi3, "build_ssp", fail)
     with pytest.raises(OSError, match="injected"):
         build_all(out)
     if not earlier:

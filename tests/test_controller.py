@@ -16,8 +16,8 @@ from controller_model.model import INPUT_START, Q_START, ControllerModel
 from controller_model.observer import observer_update
 from controller_model.parameters import TrajectoryParams
 from controller_model.virtual_trajectory import virtual_trajectory
+from impedance_cosim.fmi.fmi2_description import model_description
 from impedance_cosim.fmi.model import ModelError
-from impedance_cosim.fmi.model_description import model_description
 from impedance_cosim.fmi.units import UNITS
 from impedance_cosim.physics.arm import Arm, ArmParams
 

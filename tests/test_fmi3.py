@@ -1,7 +1,7 @@
 """The FMI 3.0 edition of the native FMUs (native/src/fmi3_glue.c,
-impedance_cosim/packaging/build3.py): standard compliance, the same interface as the FMI 2.0 FMUs,
-our master on the FMI 3 system archive equal to the FMI 2 run, fmpy simulate (Co-Simulation and
-Model Exchange), and the clocked controller under Scheduled Execution."""
+impedance_cosim/packaging/build_fmi3.py): standard compliance, the same interface as the FMI 2.0
+FMUs, our master on the FMI 3 system archive equal to the FMI 2 run, fmpy simulate (Co-Simulation
+and Model Exchange), and the clocked controller under Scheduled Execution."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from impedance_cosim.cosim.results.result import read_csv
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging import toolchains
-from impedance_cosim.packaging.build3 import CLOCKED_NAME
+from impedance_cosim.packaging.build_fmi3 import CLOCKED_NAME
 from impedance_cosim.packaging.regression import REFERENCES, compare
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")

@@ -19,7 +19,7 @@ from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import CONNECTIONS
-from impedance_cosim.packaging.build3 import CLOCKED_NAME
+from impedance_cosim.packaging.build_fmi3 import CLOCKED_NAME
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 

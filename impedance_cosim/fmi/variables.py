@@ -1,7 +1,7 @@
 """FMI variable tables: each model declares its interface once, as a list of Variable (the
 analogue of the FMI Reference FMUs' config.h). The list order is the value-reference order. The
 same table registers the variables with pythonfmu and writes the complete modelDescription.xml
-(model_description.py, FMI 2.0; variables3.py, FMI 3.0); the units are in units.py.
+(fmi2_description.py, FMI 2.0; fmi3_description.py, FMI 3.0); the units are in units.py.
 """
 
 from __future__ import annotations

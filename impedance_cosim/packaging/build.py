@@ -13,7 +13,7 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from impedance_cosim.fmi.model_description import model_description
+from impedance_cosim.fmi.fmi2_description import model_description
 from impedance_cosim.packaging import toolchains
 from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.isolate import content_tag, isolate
@@ -200,7 +200,7 @@ FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 def _native_sources(spec: FmuSpec, glue: tuple[str, ...] = FMI2_GLUE) -> dict[str, bytes]:
     """The C sources of a native FMU (flat: name -> content) with the glue of one FMI version
-    (FMI2_GLUE, or build3's FMI3_GLUE), FMI 2.0 headers from fmpy included."""
+    (FMI2_GLUE, or build_fmi3's FMI3_GLUE), FMI 2.0 headers from fmpy included."""
     import fmpy
 
     files = {}

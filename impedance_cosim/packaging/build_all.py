@@ -1,6 +1,6 @@
 """Build everything: the Python FMUs, the native FMUs (when a C compiler is present), the system
 archives per scenario, the FMI 3.0 edition and the arm's robot description files (robot/).
-Above build and build3, so neither imports the other's caller."""
+Above build and build_fmi3, so neither imports the other's caller."""
 
 from __future__ import annotations
 
@@ -118,7 +118,7 @@ def _build_into(
             for s in SCENARIOS:  # one archive per scenario, for engines without SSP variants
                 add(build_ssp(out_dir, f"{name}-{s}", fmu_dir, scenario=s))
         if native:
-            from impedance_cosim.packaging.build3 import build_fmi3  # the FMI 3.0 edition
+            from impedance_cosim.packaging.build_fmi3 import build_fmi3  # the FMI 3.0 edition
 
             add(*build_fmi3(out_dir))
         from impedance_cosim.packaging.robot_files import write_robot_files  # URDF and MJCF

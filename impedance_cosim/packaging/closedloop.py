@@ -19,9 +19,9 @@ from pathlib import Path
 
 from controller_model.model import ControllerModel
 from impedance_cosim.cosim.system.paper import CONNECTIONS, SCENARIO_DESCRIPTIONS, SCENARIOS
-from impedance_cosim.fmi.model_description import model_description
+from impedance_cosim.fmi.fmi2_description import model_description
+from impedance_cosim.fmi.fmi3_description import c_config3, model_description3
 from impedance_cosim.fmi.variables import ModelExchange, Variable
-from impedance_cosim.fmi.variables3 import c_config3, model_description3
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMI2_GLUE,
@@ -209,7 +209,7 @@ def build_closed_loop3(scenario: str, out_dir: Path = DEFAULT_OUT / "fmi3") -> P
     """out_dir/PaperClosedLoop-<scenario>.fmu, FMI 3.0 (the FMI 3 layer over the same code)."""
     import fmpy
 
-    from impedance_cosim.packaging.build3 import FMI3_GLUE, FMI3_HEADERS
+    from impedance_cosim.packaging.build_fmi3 import FMI3_GLUE, FMI3_HEADERS
 
     sources = _sources(scenario, FMI3_GLUE)
     headers = Path(fmpy.__file__).parent / "c-code"

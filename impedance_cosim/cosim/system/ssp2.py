@@ -2,7 +2,7 @@
 what 2.0 can say and 1.0 cannot.
 
 - FMI 3 typed connectors and parameters (Float64 with units, Int32, Boolean, String), as the
-  FMI 3.0 FMUs declare their variables (fmi/variables3.py).
+  FMI 3.0 FMUs declare their variables (fmi/fmi3_description.py).
 - The clocked controller (ImpedanceControllerClocked.fmu, Scheduled Execution) with its input
   clock `sample_clock` as a Clock connector (periodic, intervalVariability fixed: the interval is
   the parameter sample_period), its clocked inputs and outputs associated to it (ssd:Clock), and

@@ -20,7 +20,12 @@ import uuid
 import zipfile
 from pathlib import Path
 
-from impedance_cosim.fmi.variables3 import SampleClock, c_config3, full_table, model_description3
+from impedance_cosim.fmi.fmi3_description import (
+    SampleClock,
+    c_config3,
+    full_table,
+    model_description3,
+)
 from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,

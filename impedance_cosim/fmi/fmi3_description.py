@@ -9,7 +9,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-from impedance_cosim.fmi.model_description import LOG_CATEGORIES, exact_dependencies, xml_value
+from impedance_cosim.fmi.fmi2_description import LOG_CATEGORIES, exact_dependencies, xml_value
 from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
 from impedance_cosim.fmi.variables import (
     METADATA,

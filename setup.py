@@ -5,6 +5,7 @@ copied, not built, here: build them first (`impedance-cosim build`); IMPCOSIM_WH
 another build folder. The sdist carries them in fmus/, so that `python -m build` (an sdist, then
 a wheel built from it) gives the same wheel. Everything else is in pyproject.toml."""
 
+import functools
 import importlib.util
 import os
 import shutil
@@ -17,8 +18,9 @@ from setuptools.command.sdist import sdist
 HERE = Path(__file__).resolve().parent
 
 
+@functools.cache
 def _wheel_fmus():
-    """impedance_cosim/packaging/wheel_fmus.py, loaded by path (standard library only)."""
+    """impedance_cosim/packaging/wheel_fmus.py, loaded by path (standard library only), once."""
     path = HERE / "impedance_cosim" / "packaging" / "wheel_fmus.py"
     spec = importlib.util.spec_from_file_location("_impcosim_wheel_fmus", path)
     module = importlib.util.module_from_spec(spec)

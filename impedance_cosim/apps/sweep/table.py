@@ -67,9 +67,9 @@ def read_table(path: Path) -> list[dict]:
             rows = list(csv.DictReader(f))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise TableError(f"cannot read {path}: {' '.join(str(exc).split())}") from None
-    for n, row in enumerate(rows, start=2):
+    for n, row in enumerate(rows, start=1):
         if None in row or None in row.values():
-            raise TableError(f"{path}: row {n - 1} has another number of cells than the header")
+            raise TableError(f"{path}: row {n} has another number of cells than the header")
     return [
         {
             k: (None if v == "" else v if k in ("status", "error") else parse_value(v))

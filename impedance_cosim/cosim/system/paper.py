@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -243,10 +244,20 @@ def _units(root: ET.Element, prefix: str, used: set[str]) -> None:
 
 def ssv_xml(scenario: str, component: str) -> bytes:
     """One component's values in a scenario's parameter set (names relative to the component)."""
+    return parameter_set_xml(scenario, component, {"version": "1.0", **META}, _type_element)
+
+
+def parameter_set_xml(
+    scenario: str, component: str, header: dict[str, str], typed: Callable
+) -> bytes:
+    """The SSV of one component in a scenario, for either SSP version: header (its version and
+    meta data) on the root, typed(parameter element, "ssv", variable, value) writing each value's
+    type element as that version spells it."""
     root = ET.Element(
         _q("ssv", "ParameterSet"),
-        {"version": "1.0", "name": scenario, "description": SCENARIO_DESCRIPTIONS[scenario],
-         **META},
+        {"version": header["version"], "name": scenario,
+         "description": SCENARIO_DESCRIPTIONS[scenario],
+         **{k: v for k, v in header.items() if k != "version"}},
     )  # fmt: skip
     params = ET.SubElement(root, _q("ssv", "Parameters"))
     used_units: set[str] = set()
@@ -255,7 +266,7 @@ def ssv_xml(scenario: str, component: str) -> bytes:
             continue
         v = parameter_variable(pname)
         p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": pname.split(".", 1)[1]})
-        _type_element(p, "ssv", v, value)
+        typed(p, "ssv", v, value)
         if v.type == "Real" and v.unit:
             used_units.add(v.unit)
     _units(root, "ssv", used_units)

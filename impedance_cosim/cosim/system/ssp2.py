@@ -35,7 +35,7 @@ from impedance_cosim.cosim.system.paper import (
     bound_parameters,
     connections_element,
     experiment_element,
-    parameter_variable,
+    parameter_set_xml,
     ssd_name,
     ssv_name,
 )
@@ -219,28 +219,7 @@ def _srmd(element: ET.Element, name: str, spec: Component2, checksum: str) -> No
 
 def ssv2_xml(scenario: str, component: str) -> bytes:
     """One component's values in a scenario's parameter set, as SSP 2.0 (FMI 3 types)."""
-    root = ET.Element(
-        _q("ssv", "ParameterSet"),
-        {
-            "version": VERSION,
-            "name": scenario,
-            "description": SCENARIO_DESCRIPTIONS[scenario],
-            **META2,
-        },
-    )
-    params = ET.SubElement(root, _q("ssv", "Parameters"))
-    used_units: set[str] = set()
-    for pname, value in SCENARIOS[scenario].items():
-        if not pname.startswith(component + "."):
-            continue
-        v = parameter_variable(pname)
-        p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": pname.split(".", 1)[1]})
-        _typed(p, "ssv", v, value)
-        if v.type == "Real" and v.unit:
-            used_units.add(v.unit)
-    _units(root, "ssv", used_units)
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+    return parameter_set_xml(scenario, component, {"version": VERSION, **META2}, _typed)
 
 
 def archive_files(fmus: Mapping[str, bytes]) -> dict[str, bytes]:

@@ -153,7 +153,13 @@ def _dispatch(args: argparse.Namespace) -> int:
 
     prefix = f"impedance-cosim {args.command}:"
     try:
-        return args.func(args)
+        try:
+            return args.func(args)
+        except Exception as exc:  # raised while an interruption unwound: it is the interruption
+            interruption = _interruption_behind(exc)
+            if interruption is None:
+                raise
+            raise interruption from None
     except CliError as exc:  # our own wording (may list several problems, one per line)
         print(f"{prefix} error: {exc}", file=sys.stderr)
         return 2
@@ -182,6 +188,19 @@ def _dispatch(args: argparse.Namespace) -> int:
     finally:  # remove what read_ssp extracted, on every exit path
         if getattr(args, "system", None) is not None:
             args.system.close()
+
+
+def _interruption_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM during whose handling exc was raised, if any (e.g. a closed pipe's
+    EBADF from subprocess's clean-up when the signal landed while it started a compiler)."""
+    seen: set[int] = set()
+    context = exc.__context__
+    while context is not None and id(context) not in seen:
+        if isinstance(context, KeyboardInterrupt):
+            return context
+        seen.add(id(context))
+        context = context.__context__
+    return None
 
 
 def _one_line(exc: BaseException) -> str:

@@ -174,3 +174,27 @@ def test_the_command_line_module_loads_no_command():
     code = "import sys, impedance_cosim.cli; print(sorted({'numpy', 'fmpy'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("signum", [2, 15])
+def test_an_error_raised_while_an_interrupt_unwinds_reports_the_interrupt(signum, capsys):
+    """A signal that lands while subprocess starts a compiler can surface as the OSError of its
+    clean-up (EBADF: a pipe closed twice), with the interrupt as its context: the command reports
+    the interrupt (128 + signal), as for any other interruption, not an error (exit 1)."""
+    import argparse
+    import errno
+
+    from impedance_cosim.cli import _dispatch
+
+    def build(args):
+        try:
+            exc = KeyboardInterrupt()
+            exc.signum = signum
+            raise exc
+        except KeyboardInterrupt:
+            raise OSError(errno.EBADF, "Bad file descriptor") from None
+
+    args = argparse.Namespace(command="build", func=build)
+    assert _dispatch(args) == 128 + signum
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Bad file descriptor" not in err, err

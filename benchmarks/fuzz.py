@@ -61,21 +61,22 @@ def run(
     live.mkdir(parents=True, exist_ok=True)
     findings.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, IMPCOSIM_FUZZ_FMUS=str(targets.build_fmus(work / "fmus")))
+    earlier = set(findings.iterdir())  # findings of earlier runs stay, and are not counted
     cmd = ["nice", "-n", str(niceness), *command(name, work), str(live), str(committed), *FLAGS]
     cmd += [f"-max_total_time={seconds}", f"-artifact_prefix={findings}/"]
     done = subprocess.run(cmd, capture_output=True, text=True, env=env)
     (work / f"{name}.log").write_text(done.stdout + done.stderr)
-    if update:
+    crashes = sorted(p for p in findings.iterdir() if p.is_file() and p not in earlier)
+    if update and not crashes:  # a merge would drop the inputs that crash: fix them first
         merged = work / "merged" / name
         shutil.rmtree(merged, ignore_errors=True)
         merged.mkdir(parents=True)
         merge = ["-merge=1", "-use_counters=0"]  # by edges alone: a few dozen files a target
         subprocess.run([*command(name, work), *merge, str(merged), str(committed), str(live)],
-                       capture_output=True, env=env, check=True)  # fmt: skip
+                       capture_output=True, env=env, check=True, cwd=work)  # fmt: skip
         if any(merged.iterdir()):  # an empty merge (a failed child) never wipes the corpus
             shutil.rmtree(committed)
             shutil.copytree(merged, committed)
-    crashes = sorted(p for p in findings.iterdir() if p.is_file())
     return stats(done.stdout + done.stderr), crashes
 
 

@@ -46,7 +46,13 @@ from controller_model.parameters import (
     source_by_value,
 )
 from controller_model.virtual_trajectory import virtual_trajectory
-from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
+from impedance_cosim.fmi.model import (
+    FmuModel,
+    ModelError,
+    build_params,
+    check_finite_inputs,
+    check_finite_outputs,
+)
 from impedance_cosim.fmi.variables import (
     SAMPLED_INPUTS,
     ModelExchange,
@@ -253,6 +259,7 @@ class ControllerModel(FmuModel):
                 held += 1  # strictly inside the step: the inputs at t are reused
             state = self._sample(k, *state[:4], q, f, qd_meas)
             k += 1
+        check_finite_outputs(type(self), state[4])
         self.yhat, self.q_prev, self.tau_prev, self.f_prev, self.out = state
         self.k_next = k
         self.held_input_samples += held

@@ -10,6 +10,7 @@ which must return or raise nothing but the documented error class of what it fee
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import subprocess
@@ -42,15 +43,16 @@ def clang() -> str | None:
     return shutil.which(os.environ.get("CC_FUZZ", "clang"))
 
 
+@functools.cache
 def build_fmus(out: Path) -> Path:
-    """The native FMUs built into OUT (the build cache makes this quick)."""
-    if not (out / "native" / "PumaPlant.fmu").exists():
-        subprocess.run(
-            [sys.executable, "-m", "impedance_cosim", "build", "--out", str(out)],
-            check=True,
-            capture_output=True,
-            text=True,
-        )
+    """The native FMUs of the current sources built into OUT, once per process: FMUs left from
+    older sources would fuzz old code (the build cache makes this quick)."""
+    subprocess.run(
+        [sys.executable, "-m", "impedance_cosim", "build", "--out", str(out)],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return out
 
 

@@ -16,7 +16,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from impedance_cosim.fmi.model import FmuModel, ModelError, build_params, check_finite_inputs
+from impedance_cosim.fmi.model import (
+    FmuModel,
+    ModelError,
+    build_params,
+    check_finite_inputs,
+    check_finite_outputs,
+)
 from impedance_cosim.fmi.variables import (
     ModelExchange,
     Partials,
@@ -295,9 +301,15 @@ class PlantModel(FmuModel):
             q_meas = self._measure(y[:3])
         except (OverflowError, ValueError) as exc:
             raise ModelError(f"joint angle measurement failed: {exc}") from None
+        before = (self.t, self.q, self.qd, self.in_contact, self.h, self.q_meas)
         self.t, self.q, self.qd = t_end, y[:3], y[3:]
         self.in_contact, self.h = mode, hh
         self.q_meas = q_meas
+        try:
+            check_finite_outputs(type(self), self.outputs())
+        except ModelError:
+            self.t, self.q, self.qd, self.in_contact, self.h, self.q_meas = before
+            raise
 
     def outputs(self) -> tuple:
         q, qd = self.q, self.qd

@@ -269,3 +269,20 @@ def test_a_refused_step_leaves_the_loop_at_its_start(closed_loops, native_ssp):
     finally:
         inst.free()
     assert np.abs(np.array(rows) - reference.data[:, 1:]).max() <= FLOOR
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_step_whose_outputs_overflow_is_refused(closed_loops: Path, fmi: int):
+    """fuzz target `closedloop_params` (fuzz/corpus/closedloop_params/nan-output-huge-gain):
+    controller.K1 = 2**960 with limit_torque made an output NaN within 7 steps that all returned
+    OK. Now the step whose outputs would not be finite is refused, naming the output."""
+    with pytest.raises(
+        FmuError,
+        match=r"t=0.005 returned Discard .*output controller.qd_hat1 is not finite \(nan\)",
+    ):
+        run_alone(
+            path_of(closed_loops, fmi, "observer"),
+            ["plant.x"],
+            8 * H,
+            parameters={"controller.K1": 2.0**960, "controller.limit_torque": True},
+        )

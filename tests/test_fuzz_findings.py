@@ -4,6 +4,7 @@ outcome spelled out."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -75,3 +76,53 @@ def test_controller_event_after_a_huge_time_skip_is_refused_not_a_hang(native_di
     assert any("max_samples_per_step" in m for m in me.messages), me.messages
     me.fmu.terminate()
     me.fmu.freeInstance()
+
+
+START = (0.0, 0.7, -0.7, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # angles, wrist force, measured qd
+HUGE_ANGLE = (1e307, *START[1:])  # K (q1 - q1_prev) overflows (K = 50)
+REFUSAL = "output tau1 is not finite (nan): the computation overflowed"  # C and Python alike
+
+
+def test_python_controller_refuses_a_step_whose_outputs_overflow():
+    """fuzz target `closedloop_params` (fuzz/corpus/closedloop_params/nan-output-huge-gain:
+    an output became NaN after steps that returned OK). A controller step whose outputs would not
+    be finite is refused, naming the output, and the model stays at the step's start."""
+    from controller_model.model import ControllerModel
+    from impedance_cosim.fmi.model import ModelError
+
+    model = ControllerModel({})
+    model.do_step(0.0, 1 / 400, START)  # sample 0 was taken at initialization
+    before = model.outputs()
+    with pytest.raises(ModelError) as refused:
+        model.do_step(1 / 400, 1 / 400, HUGE_ANGLE)  # sample 1, at t = 1/400
+    assert str(refused.value) == REFUSAL
+    assert model.t == 1 / 400 and model.outputs() == before
+    model.do_step(1 / 400, 1 / 400, START)  # and it can go on
+    assert all(math.isfinite(v) for v in model.outputs())
+
+
+def test_native_controller_refuses_a_step_whose_outputs_overflow(native_dir: Path):
+    """The same through the native FMI 2.0 controller: fmi2Discard, the same message in the log,
+    and the outputs of the step's start kept."""
+    from fmpy import extract, instantiate_fmu, read_model_description
+    from fmpy.fmi1 import FMICallException
+
+    path = native_dir / "ImpedanceController.fmu"
+    md = read_model_description(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    outputs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    messages: list[str] = []
+    fmu = instantiate_fmu(extract(path), md, logger=lambda *a: messages.append(a[-1].decode()))
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    angles = [vr[n] for n in ("q1", "q2", "q3")]
+    fmu.setReal(angles, list(START[:3]))
+    fmu.doStep(0.0, 1 / 400)
+    before = fmu.getReal(outputs)
+    fmu.setReal(angles, list(HUGE_ANGLE[:3]))
+    with pytest.raises(FMICallException):
+        fmu.doStep(1 / 400, 1 / 400)
+    assert messages == [f"at t=0.0025000000000000001: {REFUSAL}"]
+    assert fmu.getReal(outputs) == before
+    fmu.terminate()
+    fmu.freeInstance()

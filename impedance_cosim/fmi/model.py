@@ -8,6 +8,7 @@ pythonfmu slave, and tests drive the class directly.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, ClassVar, TypeVar
 
 from impedance_cosim.fmi.variables import Variable
@@ -77,3 +78,17 @@ def check_finite_inputs(names: tuple[str, ...], values: tuple) -> None:
     for name, v in zip(names, values):
         if not (v - v == 0.0):  # false for NaN and +-inf
             raise ModelError(f"input {name} is not finite ({v})")
+
+
+@functools.cache
+def output_names(model_class: type[FmuModel]) -> tuple[str, ...]:
+    """The model's output names, in the order of its outputs()."""
+    return tuple(v.name for v in model_class.variables() if v.causality == "output")
+
+
+def check_finite_outputs(model_class: type[FmuModel], values: tuple) -> None:
+    """Raise ModelError naming the first non-finite output: a step whose numbers overflowed is
+    refused, so a host never reads a non-finite output after OK (as native/src/instance.c)."""
+    for name, v in zip(output_names(model_class), values):
+        if not (v - v == 0.0):  # false for NaN and +-inf
+            raise ModelError(f"output {name} is not finite ({v}): the computation overflowed")

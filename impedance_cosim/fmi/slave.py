@@ -28,7 +28,7 @@ from typing import Any
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
-from impedance_cosim.fmi.model import FmuModel, ModelError
+from impedance_cosim.fmi.model import FmuModel, ModelError, check_finite_outputs
 
 _PY_VAR = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 _CONVERT = {"Real": float, "Integer": int, "Boolean": bool, "String": str}
@@ -202,10 +202,12 @@ class ModelSlave:
     def _build(self) -> None:
         params = {n: self._values[n] for n in self._params}
         try:
-            self.model = self.model_class(params, self._start_time, self._input_values())
+            model = self.model_class(params, self._start_time, self._input_values())
+            outputs = list(model.outputs())
+            check_finite_outputs(self.model_class, outputs)
         except ModelError as exc:
             self._fail(str(exc))
-        self._outputs = list(self.model.outputs())
+        self.model, self._outputs = model, outputs
         self._dirty = False
         for warning in self.model.init_warnings:
             self._report(warning, warning=True)

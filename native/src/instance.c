@@ -7,9 +7,10 @@
  * -> terminated; a call out of order returns fmi2Error with a logged message and changes nothing.
  * Errors are always logged (whatever fmi2SetDebugLogging says); other messages only with logging
  * on. Parameter values are checked when set (finite, >= min) and again before initialization;
- * non-finite inputs are refused when set. A step that cannot be taken returns fmi2Discard and
- * leaves the instance at the step's start; fmi2GetBooleanStatus(fmi2Terminated) then says true,
- * so that a master which can only retry the same step (fmpy simulate) stops. A serialized FMU
+ * non-finite inputs are refused when set. A step that cannot be taken, or whose outputs would not
+ * be finite, returns fmi2Discard and leaves the instance at the step's start;
+ * fmi2GetBooleanStatus(fmi2Terminated) then says true, so that a master which can only retry the
+ * same step (fmpy simulate) stops. A serialized FMU
  * state carries a CRC-32 over all its bytes and holds finite numbers only: anything else is
  * refused (fmi2Error, logged), and so is the state of another build (see SerialHeader).
  */
@@ -24,6 +25,7 @@
 #include "glue.h"
 #include "guid.h" /* MODEL_GUID, written by the build */
 #include "instance.h" /* Phase, Snapshot, Instance; the Model Exchange side is instance_me.c */
+#include "pyrepr.h"
 
 #define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
 
@@ -106,6 +108,22 @@ int check_parameter(int vr, double value, char *msg)
     return 0;
 }
 
+/* Every real output finite: a step or an initialization whose numbers overflowed is refused, so a
+ * host never reads a non-finite output after OK (a diverging loop stops at that step). 0 if all
+ * are finite, else 1 with msg naming the first that is not. */
+static int check_outputs(const Data *d, char *msg)
+{
+    for (int vr = 0; vr < N_VARS; vr++) {
+        if (VARS[vr].type == T_REAL && VARS[vr].causality == C_OUTPUT && !isfinite(d->r[vr])) {
+            char value[32];
+            py_float_repr(d->r[vr], value, sizeof value); /* as the Python models say it */
+            return fail(msg, "output %s is not finite (%s): the computation overflowed",
+                        VARS[vr].name, value);
+        }
+    }
+    return 0;
+}
+
 int initialize(Instance *inst)
 {
     Data tmp = inst->s.d;
@@ -119,7 +137,7 @@ int initialize(Instance *inst)
         }
     }
     inst->msg[0] = '\0';
-    if (model_initialize(&tmp, inst->msg)) {
+    if (model_initialize(&tmp, inst->msg) || check_outputs(&tmp, inst->msg)) {
         return 1;
     }
     /* a message left by a successful model_initialize is a warning (e.g. the controller's
@@ -306,7 +324,8 @@ fmi2Status instance_do_step(fmi2Component c, fmi2Real currentCommunicationPoint,
      * the step is refused (cheaper than stepping a full copy of Data). */
     backup_m = inst->s.d.m;
     memcpy(backup_r, inst->s.d.r, sizeof backup_r);
-    if (step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg)) {
+    if (step(&inst->s.d, currentCommunicationPoint, communicationStepSize, inst->msg) ||
+        check_outputs(&inst->s.d, inst->msg)) {
         inst->s.d.m = backup_m;
         memcpy(inst->s.d.r, backup_r, sizeof backup_r);
         log_message(inst, fmi2Error, "logStatusError", "at t=%.17g: %s",

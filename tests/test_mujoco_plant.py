@@ -1,25 +1,24 @@
 """MujocoPlant (plant_model/mujoco_plant.py): PumaPlant's interface simulated by MuJoCo from the
 MJCF it carries. Its numbers follow the parameters as an MJCF written with them would; free
 motion agrees with PumaPlant to the integrators' accuracy; the contact force and the wrist
-sensor are the wall law; the paper's scenario swaps in; without MuJoCo it fails in one line."""
+sensor are the wall law; the paper's scenario swaps in (what every swapped-in plant must do
+alike is in test_swapped_plants.py)."""
 
 from __future__ import annotations
 
 import ast
-import csv
 import json
-import os
 import subprocess
 import sys
 import zipfile
 from dataclasses import replace
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
-from fmpy_cli import fmpy_cli
+from plant_motion import free_motion
 
+from impedance_cosim.cosim.results.result import read_csv
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.packaging.mujoco_mjcf import MUJOCO_MJCF_NAME, mujoco_mjcf
 from impedance_cosim.physics.arm import Arm, ArmParams
@@ -78,15 +77,6 @@ def test_parameters_set_what_an_mjcf_with_them_says(bundled):
             mujoco.mj_fullM(m, d, h)
         assert np.abs(h1 - h2).max() < 1e-12 and np.abs(d1.qacc - d2.qacc).max() < 1e-10
         assert np.abs(h1 - np.array(Arm(CHANGED).inertia(tuple(d1.qpos)))).max() < 1e-10
-
-
-def free_motion(model, steps: int, h: float = 1 / 400) -> np.ndarray:
-    """Outputs of a model left alone (zero torque, falling under gravity) at every step."""
-    rows = [model.outputs()]
-    for i in range(steps):
-        model.do_step(i * h, h, (0.0, 0.0, 0.0))
-        rows.append(model.outputs())
-    return np.array(rows)
 
 
 @pytest.mark.parametrize("params", [{}, {f: getattr(CHANGED, f) for f in ("a1", "a3", "m3", "g")}])
@@ -180,12 +170,6 @@ def test_the_fmu_carries_the_mjcf_and_declares_mujoco(fmu_dir):
     assert 'needsExecutionTool="false"' in md
 
 
-def read(path: Path) -> dict[str, np.ndarray]:
-    with path.open() as f:
-        rows = list(csv.reader(f))
-    return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
-
-
 @pytest.mark.slow
 def test_swap_runs_the_paper_scenario(fmu_dir, ssp_path, tmp_path):
     """`swap --replace plant=MujocoPlant.fmu` runs the 20 s paper scenario (observer): the
@@ -201,7 +185,7 @@ def test_swap_runs_the_paper_scenario(fmu_dir, ssp_path, tmp_path):
                 "--out", str(tmp_path / name), "--no-figures", "--no-progress"]  # fmt: skip
         done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, done.stderr[-2000:]
-        runs[name] = read(tmp_path / name / "observer.csv")
+        runs[name] = read_csv(tmp_path / name / "observer.csv")
     ours, theirs = runs["ours"], runs["mujoco"]
     free = ours["time"] < 3.8
     q = [f"plant.q{i}_true" for i in (1, 2, 3)]
@@ -214,96 +198,3 @@ def test_swap_runs_the_paper_scenario(fmu_dir, ssp_path, tmp_path):
     assert record["runs"][0]["fmus"]["plant"]["model"] == "MujocoPlant"
     assert record["runs"][0]["fmus"]["plant"]["in_system_archive"] is False
     assert "MujocoPlant" in (tmp_path / "mujoco" / "report.html").read_text()
-
-
-CHILD = """
-import sys
-sys.modules["mujoco"] = None  # as if MuJoCo were not installed
-from fmpy import simulate_fmu
-try:
-    simulate_fmu(sys.argv[1], stop_time=0.01)
-except Exception as exc:
-    print("failed:", type(exc).__name__)
-    sys.exit(1)
-"""
-
-
-def test_without_mujoco_the_fmu_says_so(fmu_dir):
-    done = subprocess.run([sys.executable, "-c", CHILD, str(fmu_dir / "MujocoPlant.fmu")],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
-    assert done.returncode == 1, (done.stdout, done.stderr)
-    lines = [line for line in done.stderr.splitlines() if "MujocoPlant needs" in line]
-    assert len(lines) == 1 and "pip install mujoco==4.0.0" in lines[0], done.stderr
-    assert "Traceback" not in done.stderr
-
-
-def test_swap_without_mujoco_fails_in_one_line(fmu_dir, ssp_path, tmp_path):
-    """The swap where mujoco cannot be imported: exit status 1, one error line naming it."""
-    hidden = tmp_path / "hidden" / "mujoco"
-    hidden.mkdir(parents=True)
-    (hidden / "__init__.py").write_text('raise ImportError("No module named mujoco (hidden)")')
-    env = {**os.environ, "PYTHONPATH": str(hidden.parent)}
-    argv = [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
-            f"plant={fmu_dir}/MujocoPlant.fmu", "--stop", "0.1", "--out", str(tmp_path / "out"),
-            *RUN]  # fmt: skip
-    done = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
-    assert done.returncode == 1, done.stderr
-    errors = [line for line in done.stderr.splitlines() if "error:" in line]
-    assert errors[-1].startswith("impedance-cosim swap: error: ") and "Traceback" not in done.stderr
-    assert "MujocoPlant needs the Python package mujoco" in errors[-1]
-
-
-@pytest.mark.slow
-def test_default_experiment_runs_alone_as_pumaplants_reference(fmu_dir, tmp_path):
-    """`fmpy simulate` on its own (the 20 s default experiment: the arm falls, swings, hangs):
-    PumaPlant's reference result (PumaPlant_ref.csv) to 1e-7."""
-    from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
-
-    out = tmp_path / "out.csv"
-    fmpy_cli(["simulate", str(fmu_dir / "MujocoPlant.fmu"), "--output-interval", "0.0025",
-              "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
-    rows = read(out)
-    ref = read_csv(next(p for p in REFERENCES if p.name == "PumaPlant_ref.csv"))
-    assert len(rows["time"]) == 8001
-    assert compare({k: v[::40] for k, v in rows.items()}, ref, rtol=1e-7) == []
-
-
-def test_state_restore_in_contact_is_bit_identical(fmu_dir):
-    """Pushed into the wall (noisy encoders): step, save, step, restore, step again, also into a
-    second instance through serialization: identical outputs."""
-    from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
-
-    def started(name):
-        fmu = FmuInstance(fmu_dir / "MujocoPlant.fmu", name)
-        fmu.setup(0.0)
-        fmu.set({"x0": 0.649, "q_noise": 1e-4})
-        fmu.enter_initialization()
-        fmu.exit_initialization()
-        fmu.set({"tau1": 30.0, "tau2": 20.0, "tau3": 1.0})
-        return fmu
-
-    fmu = started("a")
-    outputs = [v.name for v in fmu.description.modelVariables if v.causality == "output"]
-    for i in range(40):
-        fmu.step(i / 400, 1 / 400)
-    state = fmu.get_state()
-    blob = fmu.serialize_state(state)
-
-    def run(f) -> list:
-        rows = []
-        for i in range(40, 60):
-            f.step(i / 400, 1 / 400)
-            rows.append(f.get(outputs))
-        return rows
-
-    first = run(fmu)
-    assert max(r[outputs.index("contact_force")] for r in first) > 1.0  # in contact
-    fmu.set_state(state)
-    assert run(fmu) == first
-    other = started("b")
-    other.set_state(other.deserialize_state(blob))
-    assert run(other) == first
-    fmu.free_state(state)
-    for f in (fmu, other):
-        f.terminate()
-        f.free()

@@ -1,13 +1,11 @@
 """PinocchioPlant (plant_model/urdf_plant.py): PumaPlant's interface with the arm's dynamics from
 Pinocchio and the URDF. Its numbers follow the parameters as a URDF written with them would; free
-motion and the paper's closed loop (a swap) agree with PumaPlant to rounding; without Pinocchio
-it fails with one line saying so."""
+motion and the paper's closed loop (a swap) agree with PumaPlant to rounding (what every
+swapped-in plant must do alike is in test_swapped_plants.py)."""
 
 from __future__ import annotations
 
 import ast
-import csv
-import os
 import subprocess
 import sys
 import zipfile
@@ -17,8 +15,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from fmpy_cli import fmpy_cli
+from plant_motion import free_motion
 
+from impedance_cosim.cosim.results.result import read_csv
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.packaging import robot_check
 from impedance_cosim.packaging.robot_files import URDF_NAME, write_robot_files
@@ -65,15 +64,6 @@ def test_parameters_set_what_a_urdf_with_them_says(default_urdf, tmp_path):
     ).values()) < 1e-10  # fmt: skip
 
 
-def free_motion(model, steps: int, h: float = 1 / 400) -> np.ndarray:
-    """Outputs of a model left alone (zero torque, falling under gravity) at every step."""
-    rows = [model.outputs()]
-    for i in range(steps):
-        model.do_step(i * h, h, (0.0, 0.0, 0.0))
-        rows.append(model.outputs())
-    return np.array(rows)
-
-
 @pytest.mark.parametrize("params", [{}, {f: getattr(CHANGED, f) for f in ("a1", "a3", "m3", "g")}])
 def test_free_motion_agrees_with_pumaplant(bundled, params):
     """1 s of free fall from the start pose: every output within 1e-9 of PumaPlant's (the same
@@ -103,12 +93,6 @@ def test_the_fmu_carries_the_plants_urdf(fmu_dir, default_urdf):
     assert files == {URDF_NAME: default_urdf.read_text()}
 
 
-def read(path: Path) -> dict[str, np.ndarray]:
-    with path.open() as f:
-        rows = list(csv.reader(f))
-    return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
-
-
 @pytest.mark.slow
 def test_swap_runs_the_paper_scenario_as_pumaplant(fmu_dir, ssp_path, tmp_path):
     """`swap --replace plant=PinocchioPlant.fmu` runs the closed loop through the first impact
@@ -123,34 +107,12 @@ def test_swap_runs_the_paper_scenario_as_pumaplant(fmu_dir, ssp_path, tmp_path):
                 str(tmp_path / name), "--no-figures", "--no-report", "--no-progress"]  # fmt: skip
         done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, done.stderr[-2000:]
-        runs[name] = read(tmp_path / name / "observer.csv")
+        runs[name] = read_csv(tmp_path / name / "observer.csv")
     ours, theirs = runs["ours"], runs["pin"]
     assert ours.keys() == theirs.keys()
     assert ours["plant.contact_force"].max() > 50.0  # the impact is in it
     worst = max(np.abs(ours[k] - theirs[k]).max() for k in ours)
     assert worst < 1e-9, worst
-
-
-CHILD = """
-import sys
-import zipfile
-sys.modules["pinocchio"] = None  # as if Pinocchio were not installed
-from fmpy import simulate_fmu
-try:
-    simulate_fmu(sys.argv[1], stop_time=0.01)
-except Exception as exc:
-    print("failed:", type(exc).__name__)
-    sys.exit(1)
-"""
-
-
-def test_without_pinocchio_the_fmu_says_so(fmu_dir):
-    done = subprocess.run([sys.executable, "-c", CHILD, str(fmu_dir / "PinocchioPlant.fmu")],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
-    assert done.returncode == 1, (done.stdout, done.stderr)
-    lines = [line for line in done.stderr.splitlines() if "PinocchioPlant needs" in line]
-    assert len(lines) == 1 and "pip install pin==4.1.0" in lines[0], done.stderr
-    assert "Traceback" not in done.stderr
 
 
 def test_the_dynamics_are_pinocchios(bundled):
@@ -159,76 +121,3 @@ def test_the_dynamics_are_pinocchios(bundled):
     model.robot.armature = np.zeros(3)
     ours = free_motion(PlantModel({}), 100)
     assert np.abs(free_motion(model, 100) - ours).max() > 1e-3
-
-
-def test_swap_without_pinocchio_fails_in_one_line(fmu_dir, ssp_path, tmp_path):
-    """The run command with PinocchioPlant where Pinocchio cannot be imported: exit status 1 and
-    one error line naming what is missing."""
-    hidden = tmp_path / "hidden" / "pinocchio"
-    hidden.mkdir(parents=True)
-    (hidden / "__init__.py").write_text('raise ImportError("No module named pinocchio (hidden)")')
-    env = {**os.environ, "PYTHONPATH": str(hidden.parent)}
-    argv = [*CLI, "swap", "--ssp", str(ssp_path), "--replace",
-            f"plant={fmu_dir}/PinocchioPlant.fmu", "--stop", "0.1", "--out", str(tmp_path / "out"),
-            "--no-figures", "--no-report", "--no-progress"]  # fmt: skip
-    done = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
-    assert done.returncode == 1, done.stderr
-    errors = [line for line in done.stderr.splitlines() if "error:" in line]
-    assert errors[-1].startswith("impedance-cosim swap: error: ") and "Traceback" not in done.stderr
-    assert "PinocchioPlant needs the Python package pin" in errors[-1]
-
-
-@pytest.mark.slow
-def test_default_experiment_matches_pumaplants_reference(fmu_dir, tmp_path):
-    """`fmpy simulate` on its own (the 20 s default experiment: the arm falls, swings, hangs):
-    PumaPlant's reference result (PumaPlant_ref.csv) to 1e-9."""
-    from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
-
-    out = tmp_path / "out.csv"
-    fmpy_cli(["simulate", str(fmu_dir / "PinocchioPlant.fmu"), "--output-interval", "0.0025",
-              "--output-file", str(out)], check=True, timeout=300)  # fmt: skip
-    rows = read(out)
-    ref = read_csv(next(p for p in REFERENCES if p.name == "PumaPlant_ref.csv"))
-    assert len(rows["time"]) == 8001
-    assert compare({k: v[::40] for k, v in rows.items()}, ref, rtol=1e-9) == []
-
-
-def test_state_restore_in_contact_is_bit_identical(fmu_dir):
-    """Pushed into the wall (noisy encoders): step, save, step, restore, step again, also into a
-    second instance through serialization: identical outputs."""
-    from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
-
-    def started(name):
-        fmu = FmuInstance(fmu_dir / "PinocchioPlant.fmu", name)
-        fmu.setup(0.0)
-        fmu.set({"x0": 0.649, "q_noise": 1e-4})
-        fmu.enter_initialization()
-        fmu.exit_initialization()
-        fmu.set({"tau1": 30.0, "tau2": 20.0, "tau3": 1.0})
-        return fmu
-
-    fmu = started("a")
-    outputs = [v.name for v in fmu.description.modelVariables if v.causality == "output"]
-    for i in range(40):
-        fmu.step(i / 400, 1 / 400)
-    state = fmu.get_state()
-    blob = fmu.serialize_state(state)
-
-    def run(f) -> list:
-        rows = []
-        for i in range(40, 60):
-            f.step(i / 400, 1 / 400)
-            rows.append(f.get(outputs))
-        return rows
-
-    first = run(fmu)
-    assert max(r[outputs.index("contact_force")] for r in first) > 1.0  # in contact
-    fmu.set_state(state)
-    assert run(fmu) == first
-    other = started("b")
-    other.set_state(other.deserialize_state(blob))
-    assert run(other) == first
-    fmu.free_state(state)
-    for f in (fmu, other):
-        f.terminate()
-        f.free()

@@ -30,25 +30,18 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
+from impedance_cosim.cosim.engines import others
 from impedance_cosim.cosim.engines.container import (
     FMUCONTAINER,
     build_container,
     master_like_container,
     run_container,
 )
-from impedance_cosim.cosim.engines.others import (
-    AccumulatedTimes,
-    nanosecond_times,
-    run_in_ecospy,
-    run_in_fmpy,
-    run_in_libcosim,
-)
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.ssp.read import read_ssp
-from impedance_cosim.cosim.system.paper import CONNECTIONS, SCENARIOS
+from impedance_cosim.cosim.system.paper import SCENARIOS
 
 H = 0.0025
-SIGNALS = sorted({f"{se}.{sc}" for se, sc, _, _ in CONNECTIONS})  # every connected output
 LAW = ["controller.qd_hat1", "controller.qd_obs1", "controller.qd_diff1"]
 JACOBI_STOP = {"observer": 20.0, "difference": 0.45, "measured": 2.5}
 FMUS = Path(__file__).resolve().parent.parent / "fmus"
@@ -58,12 +51,11 @@ def ours(archive: Path, algorithm: str, stop: float, **conventions) -> dict[str,
     with read_ssp(archive) as system:
         result = Master(system, algorithm=algorithm, stop_time=stop, divergence_limit=1e300,
                         **conventions).run()  # fmt: skip
-    return {n: result[n] for n in SIGNALS + LAW}
+    return {n: result[n] for n in others.CONNECTED + LAW}
 
 
 def worst(a: dict, b: dict, shift: int = 0) -> float:
-    """Largest |difference| over the connected signals, b's row i against a's row i + shift."""
-    return max(float(np.max(np.abs(a[n][shift : shift + len(b[n])] - b[n]))) for n in SIGNALS)
+    return others.largest_difference(a, b, shift)[0]
 
 
 def applied(rows: dict, scenario: str) -> str:
@@ -110,7 +102,7 @@ def engine_rows(archive: Path, scenario: str, work: Path) -> list[tuple]:
     """(engine, algorithm, stop, runs, applied, vs ours on its conventions, vs ours) rows."""
     stop = JACOBI_STOP[scenario]
     jacobi = ours(archive, "jacobi", stop)
-    accumulated = ours(archive, "jacobi", stop, step_times=AccumulatedTimes(0.0, H))
+    accumulated = ours(archive, "jacobi", stop, step_times=others.AccumulatedTimes(0.0, H))
     rows = []
 
     def add(engine: str, algorithm: str, stop: float, run, same: dict, shift: int = 0,
@@ -124,22 +116,23 @@ def engine_rows(archive: Path, scenario: str, work: Path) -> list[tuple]:
         rows.append((engine, algorithm, f"{stop:g} s", "yes", applied(theirs, scenario),
                      f"{worst(same, theirs, shift):.2g}", f"{on_ours:.2g}"))  # fmt: skip
 
-    ns_grid = ours(archive, "jacobi", stop, step_times=nanosecond_times(0.0, H))
+    ns_grid = ours(archive, "jacobi", stop, step_times=others.nanosecond_times(0.0, H))
 
     def libcosim() -> dict:
-        return run_in_libcosim(archive, None, stop, H, "error")
+        return others.run_in_libcosim(archive, None, stop, H, "error")
 
     add("libcosim (as is)", "Jacobi", stop, libcosim, ns_grid, default=jacobi)
-    names = SIGNALS + LAW
+    names = others.CONNECTED + LAW
     for label, name in ((f"init(parameter_set={scenario!r})", scenario), ("init()", None),
                         ("init(parameter_set='no-such-set')", "no-such-set")):  # fmt: skip
         add(f"ecospy, {label}", "Jacobi", stop,
-            lambda name=name: run_in_ecospy(archive, name, stop, H, names), accumulated,
+            lambda name=name: others.run_in_ecospy(archive, name, stop, H, names), accumulated,
             default=jacobi)  # fmt: skip
-    fmpy_like = ours(archive, "jacobi", stop, step_times=AccumulatedTimes(0.0, H),
+    fmpy_like = ours(archive, "jacobi", stop, step_times=others.AccumulatedTimes(0.0, H),
                      zero_start_inputs=True)  # fmt: skip
     add("fmpy simulate_ssp, bindings as parameter_set", "Jacobi", stop,
-        lambda: run_in_fmpy(archive, stop, H), fmpy_like, shift=1, default=jacobi)  # fmt: skip
+        lambda: others.run_in_fmpy(archive, stop, H), fmpy_like, shift=1,
+        default=jacobi)  # fmt: skip
     add("fmpy simulate_ssp (as is)", "Jacobi", stop, lambda: fmpy_as_is(archive, stop),
         fmpy_like, shift=1, default=jacobi)  # fmt: skip
     outputs, starts = container_from_ssp(archive, work)
@@ -150,7 +143,7 @@ def engine_rows(archive: Path, scenario: str, work: Path) -> list[tuple]:
         mode = "sequential" if sequential else "parallel"
         fmu = build_container(archive, work / f"{scenario}-{mode}.fmu", sequential)
         result = master_like_container(archive, sequential, s_stop)
-        same = {n: result[n] for n in SIGNALS + LAW}
+        same = {n: result[n] for n in others.CONNECTED + LAW}
         add(f"fmucontainer ({mode}) under fmpy simulate",
             "Gauss-Seidel (plant, controller)" if sequential else "Jacobi", s_stop,
             lambda fmu=fmu, s_stop=s_stop: run_container(fmu, s_stop), same,

@@ -26,7 +26,10 @@ import numpy as np
 import pytest
 
 from impedance_cosim.cosim.engines.others import (
+    CONNECTED,
     AccumulatedTimes,
+    first_beyond,
+    largest_difference,
     nanosecond_times,
     run_in_ecospy,
     run_in_fmpy,
@@ -34,7 +37,7 @@ from impedance_cosim.cosim.engines.others import (
 )
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.ssp.read import read_ssp
-from impedance_cosim.cosim.system.paper import CONNECTIONS, SCENARIOS
+from impedance_cosim.cosim.system.paper import SCENARIOS
 from impedance_cosim.packaging.build import build_ssp
 
 H = 0.0025
@@ -44,8 +47,6 @@ STOPS = {"observer": 4.5, "measured": 2.75, "difference": 0.495}
 # Under Jacobi (the torque one step late) only the observer scenario is stable: the difference
 # and the measured ones diverge, |tau1| > 1e6 N m from these times on (our master, measured).
 DIVERGES = {"difference": 0.4825, "measured": 2.6075}
-SIGNALS = sorted({f"{se}.{sc}" for se, sc, _, _ in CONNECTIONS})  # every connected output
-DIVERGED = 1e6  # |tau1| beyond this (N m): our master's divergence limit
 
 
 def _ecospy():
@@ -70,7 +71,7 @@ def ours(archive, stop: float, **conventions) -> dict[str, np.ndarray]:
         (scenario,) = system.parameter_sets  # one set per scenario archive
         result = Master(system, scenario, algorithm="jacobi", stop_time=stop,
                         divergence_limit=1e300, **conventions).run()  # fmt: skip
-    return {name: result[name] for name in ["time", *SIGNALS]}
+    return {name: result[name] for name in ["time", *CONNECTED]}
 
 
 def in_fmpy(archive, stop: float) -> dict[str, np.ndarray]:
@@ -79,7 +80,7 @@ def in_fmpy(archive, stop: float) -> dict[str, np.ndarray]:
 
 def in_ecospy(archive, scenario: str, stop: float) -> dict[str, np.ndarray]:
     _ecospy()
-    return run_in_ecospy(archive, scenario, stop, H, SIGNALS)
+    return run_in_ecospy(archive, scenario, stop, H, CONNECTED)
 
 
 def in_libcosim(archive, stop: float) -> dict[str, np.ndarray]:
@@ -87,45 +88,33 @@ def in_libcosim(archive, stop: float) -> dict[str, np.ndarray]:
     return run_in_libcosim(archive, None, stop, H, log_level="error")
 
 
-def worst(a: dict, b: dict, shift: int = 0) -> tuple[float, str]:
-    """Largest absolute difference over the connected signals (b's row i vs a's row i + shift)."""
-    diffs = {n: float(np.max(np.abs(a[n][shift : shift + len(b[n])] - b[n]))) for n in SIGNALS}
-    name = max(diffs, key=diffs.__getitem__)
-    return diffs[name], name
-
-
 def divergence_time(run: dict, shift: int = 0) -> float:
-    beyond = np.nonzero(np.abs(run["controller.tau1"]) > DIVERGED)[0]
-    assert len(beyond), "did not diverge"
-    return (beyond[0] + shift) * H
+    """When |tau1| first exceeds 1e6 N m (our master's divergence limit)."""
+    row = first_beyond(run)
+    assert row is not None, "did not diverge"
+    return (row + shift) * H
 
 
+# each engine's time grid for our master (t_i as it computes them)
+GRIDS = {"libcosim": nanosecond_times, "ecospy": AccumulatedTimes}
+
+
+@pytest.mark.parametrize("engine", list(GRIDS))
 @pytest.mark.parametrize("scenario", list(SCENARIOS))
-def test_libcosim_runs_each_scenario_archive_as_our_jacobi_master(archives, scenario):
+def test_engine_runs_each_scenario_archive_as_our_jacobi_master(archives, scenario, engine):
     stop = STOPS[scenario]
-    theirs = in_libcosim(archives[scenario], stop)
-    same_grid = ours(archives[scenario], stop, step_times=nanosecond_times(0.0, H))
-    assert worst(same_grid, theirs)[0] <= 1e-9, worst(same_grid, theirs)
+    if engine == "libcosim":
+        theirs = in_libcosim(archives[scenario], stop)
+    else:
+        theirs = in_ecospy(archives[scenario], scenario, stop)
+    same_grid = ours(archives[scenario], stop, step_times=GRIDS[engine](0.0, H))
+    assert largest_difference(same_grid, theirs)[0] <= 1e-9, largest_difference(same_grid, theirs)
     default = ours(archives[scenario], stop)
     if scenario in DIVERGES:
         assert divergence_time(theirs) == divergence_time(default)
         assert divergence_time(default) == pytest.approx(DIVERGES[scenario])
     else:
-        assert worst(default, theirs)[0] <= 1e-9, worst(default, theirs)
-
-
-@pytest.mark.parametrize("scenario", list(SCENARIOS))
-def test_ecospy_runs_each_scenario_archive_as_our_jacobi_master(archives, scenario):
-    stop = STOPS[scenario]
-    theirs = in_ecospy(archives[scenario], scenario, stop)
-    same_grid = ours(archives[scenario], stop, step_times=AccumulatedTimes(0.0, H))
-    assert worst(same_grid, theirs)[0] <= 1e-9, worst(same_grid, theirs)
-    default = ours(archives[scenario], stop)
-    if scenario in DIVERGES:
-        assert divergence_time(theirs) == divergence_time(default)
-        assert divergence_time(default) == pytest.approx(DIVERGES[scenario])
-    else:
-        assert worst(default, theirs)[0] <= 1e-9, worst(default, theirs)
+        assert largest_difference(default, theirs)[0] <= 1e-9, largest_difference(default, theirs)
 
 
 @pytest.mark.parametrize("scenario", list(SCENARIOS))
@@ -137,7 +126,9 @@ def test_fmpy_simulate_ssp_runs_each_scenario_archive_as_our_master_on_its_conve
     fmpy_like = ours(
         archives[scenario], stop, step_times=AccumulatedTimes(0.0, H), zero_start_inputs=True
     )
-    assert worst(fmpy_like, theirs, shift=1)[0] <= 1e-9, worst(fmpy_like, theirs, shift=1)
+    assert largest_difference(fmpy_like, theirs, shift=1)[0] <= 1e-9, largest_difference(
+        fmpy_like, theirs, shift=1
+    )
     if scenario == "difference":  # Fig. 4 in fmpy: diverges, but not at the same step as ours
         assert divergence_time(theirs, shift=1) == divergence_time(fmpy_like)
         assert divergence_time(theirs, shift=1) != divergence_time(ours(archives[scenario], stop))
@@ -166,7 +157,7 @@ def test_libcosim_runs_the_default_variant_of_the_multi_scenario_archive(fmu_dir
     with read_ssp(archive) as system:
         assert list(system.parameter_sets) == list(SCENARIOS)
         result = Master(system, "observer", algorithm="jacobi", stop_time=0.25).run()
-    assert max(np.max(np.abs(result[n] - theirs[n])) for n in SIGNALS) <= 1e-9
+    assert max(np.max(np.abs(result[n] - theirs[n])) for n in CONNECTED) <= 1e-9
 
 
 def test_our_cli_runs_a_scenario_from_either_archive_form(archives, fmu_dir, tmp_path, capsys):

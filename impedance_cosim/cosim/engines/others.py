@@ -54,6 +54,8 @@ from typing import Any
 
 import numpy as np
 
+from impedance_cosim.cosim.system.paper import CONNECTIONS
+
 LOG_LEVELS = ("trace", "debug", "info", "warning", "error", "fatal")
 NS_PER_S = 1_000_000_000
 
@@ -282,3 +284,23 @@ def run_in_ecospy(
         sim.free()
     values = np.array(rows)
     return {name: values[:, k] for k, name in enumerate(names)}
+
+
+# --- comparing their rows with our master's ----------------------------------------------------
+
+CONNECTED = sorted({f"{s}.{c}" for s, c, _, _ in CONNECTIONS})  # every connected output
+
+
+def largest_difference(ours: dict, theirs: dict, shift: int = 0) -> tuple[float, str]:
+    """Largest |difference| over the connected outputs, their row i against our row i + shift
+    (fmpy's rows are one step behind), and the output where it is."""
+    diffs = {n: float(np.max(np.abs(ours[n][shift : shift + len(theirs[n])] - theirs[n])))
+             for n in CONNECTED}  # fmt: skip
+    name = max(diffs, key=diffs.__getitem__)
+    return diffs[name], name
+
+
+def first_beyond(rows: dict, limit: float = 1e6, name: str = "controller.tau1") -> int | None:
+    """The first row whose |name| exceeds limit (the unstable scenarios' divergence), or None."""
+    beyond = np.nonzero(np.abs(rows[name]) > limit)[0]
+    return int(beyond[0]) if len(beyond) else None

@@ -203,6 +203,16 @@ class PlantModel(FmuModel):
         """End-effector x and x-velocity (all the wall needs)."""
         return self._ee_x_flat(*q, *qd)
 
+    def _count_evaluation(self, counter: list[float]) -> None:
+        """One evaluation of the dynamics, counted against the communication step's budget
+        (max_rhs_evaluations): IntegrationError once it is spent."""
+        counter[0] -= 1
+        if counter[0] < 0:
+            raise IntegrationError(
+                f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
+                " one communication step (parameter max_rhs_evaluations): take a smaller step"
+            )
+
     def _rhs(self, tau, in_contact: bool, budget: list[int] | None = None):
         """y' = f(y) for y = (q, qd) with the torque held and the contact mode fixed, eq. (1).
         budget[0], when given, counts the evaluations left in this communication step
@@ -213,12 +223,7 @@ class PlantModel(FmuModel):
         counter = budget if budget is not None else [math.inf]
 
         def f(y):
-            counter[0] -= 1
-            if counter[0] < 0:
-                raise IntegrationError(
-                    f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
-                    " one communication step (parameter max_rhs_evaluations): take a smaller step"
-                )
+            self._count_evaluation(counter)
             q1, q2, q3, qd1, qd2, qd3 = y
             if in_contact:
                 x, xd = ee_x(q1, q2, q3, qd1, qd2, qd3)

@@ -30,13 +30,10 @@ from impedance_cosim.fmi.model import FmuModel, ModelError, check_finite_inputs
 from impedance_cosim.fmi.variables import Variable
 from impedance_cosim.physics.description import RobotDescription, describe
 from impedance_cosim.physics.wall import WallParams
+from plant_model.carried import carried_file
 from plant_model.model import INPUTS, PlantModel
 
 MJCF_FILE = "puma3_mujoco.xml"
-try:  # imported with this module (a later import could not find a build's deleted stage)
-    from plant_model.carried_files import FILES as CARRIED  # generated into the FMU by the build
-except ImportError:  # the checkout: only the build writes it
-    CARRIED: dict[str, str] = {}
 NEEDS = "the Python package mujoco (MuJoCo 4.0: pip install mujoco==4.0.0) in the Python running it"
 MAX_SUBSTEPS = 1_000_000  # MuJoCo steps in one communication step (a bound on a request's work)
 NOT_HERE = ("euler_substeps", "rtol", "atol", "max_rhs_evaluations")  # PumaPlant's integrator's
@@ -47,9 +44,7 @@ TIMESTEP = Variable("timestep", "parameter", 2.5e-4, "Longest MuJoCo (RK4) step:
 
 def carried_mjcf() -> str:
     """The MJCF the FMU carries (ModelError outside a built FMU: only the build writes it)."""
-    if MJCF_FILE not in CARRIED:
-        raise ModelError(f"{MJCF_FILE} is missing (the FMU carries it: rebuild the FMU)")
-    return CARRIED[MJCF_FILE]
+    return carried_file(MJCF_FILE)
 
 
 def contact_solref(

@@ -23,23 +23,17 @@ from typing import Any
 
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.physics.description import RobotDescription, describe
-from impedance_cosim.physics.ode import IntegrationError
 from impedance_cosim.physics.wall import contact_event, contact_force_law, wall_force
+from plant_model.carried import carried_file
 from plant_model.model import PlantModel
 
 URDF_FILE = "puma3.urdf"
-try:  # imported with this module (a later import could not find a build's deleted stage)
-    from plant_model.carried_files import FILES as CARRIED  # generated into the FMU by the build
-except ImportError:  # the checkout: only the build writes it
-    CARRIED: dict[str, str] = {}
 NEEDS = "the Python package pin (Pinocchio 4.1: pip install pin==4.1.0) in the Python running it"
 
 
 def carried_urdf() -> str:
     """The URDF the FMU carries (ModelError outside a built FMU: only the build writes it)."""
-    if URDF_FILE not in CARRIED:
-        raise ModelError(f"{URDF_FILE} is missing (the FMU carries it: rebuild the FMU)")
-    return CARRIED[URDF_FILE]
+    return carried_file(URDF_FILE)
 
 
 def pinocchio_arm(pin: Any, urdf: str, desc: RobotDescription) -> Any:
@@ -119,12 +113,7 @@ class PinocchioPlantModel(PlantModel):
         counter = budget if budget is not None else [math.inf]
 
         def f(y):
-            counter[0] -= 1
-            if counter[0] < 0:
-                raise IntegrationError(
-                    f"more than {self.setup.max_rhs_evaluations} evaluations of the dynamics in"
-                    " one communication step (parameter max_rhs_evaluations): take a smaller step"
-                )
+            self._count_evaluation(counter)
             qd = np.asarray(y[3:])
             net = tau - damping * qd
             if in_contact:

@@ -117,3 +117,26 @@ def fmi3_dir(fmu_dir: Path, native_dir: Path) -> Path:
 
     build_fmi3(fmu_dir)
     return fmu_dir / "fmi3"
+
+
+@pytest.fixture
+def robot(request: pytest.FixtureRequest, tmp_path: Path):
+    """start(*extra, realtime=False, timeout=20.0) -> port: `impedance-cosim robot` on a free
+    loopback port with the test module's TOKEN, its stderr in start.log (start.proc: the process);
+    every robot started is stopped afterwards."""
+    from impedance_cosim.apps.robot_process import start_robot, stop_robot
+
+    procs = []
+
+    def start(*extra: str, realtime: bool = False, timeout: float = 20.0) -> int:
+        start.log = tmp_path / f"robot{len(procs)}.log"
+        with open(start.log, "w") as err:
+            proc, port = start_robot(request.module.TOKEN, realtime, list(extra),
+                                     timeout=timeout, stderr=err)  # fmt: skip
+        procs.append(proc)
+        start.proc = proc
+        return port
+
+    yield start
+    for proc in procs:
+        stop_robot(proc)

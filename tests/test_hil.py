@@ -19,7 +19,6 @@ import pytest
 from bridge_model import protocol
 from impedance_cosim.apps.hil import replacement_problems
 from impedance_cosim.apps.robot import Fault
-from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master import realtime
 from impedance_cosim.cosim.master.master import RT_COLUMNS, Master
@@ -38,22 +37,6 @@ def system(ssp_path):
 @pytest.fixture(scope="module")
 def bridge(fmu_dir) -> Path:
     return fmu_dir / "BridgePlant.fmu"
-
-
-@pytest.fixture
-def robot(request):
-    """start(extra args, realtime=False) -> port; every process started is killed afterwards."""
-    procs = []
-
-    def start(*extra: str, realtime: bool = False) -> int:
-        proc, port = start_robot(TOKEN, realtime, list(extra), timeout=20.0)
-        procs.append(proc)
-        start.proc = proc
-        return port
-
-    yield start
-    for proc in procs:
-        stop_robot(proc)
 
 
 # A run that is not about timeouts must not fail because the machine is slow.

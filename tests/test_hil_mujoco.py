@@ -12,7 +12,6 @@ import pytest
 
 from bridge_model import protocol
 from impedance_cosim.apps.robot_plant import plant_class
-from impedance_cosim.apps.robot_process import start_robot, stop_robot
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.results import result as results
@@ -28,18 +27,13 @@ def system(ssp_path):
 
 
 @pytest.fixture
-def robot():
-    """start(extra args, realtime=False) -> port of a robot on MuJoCo; killed afterwards."""
-    procs = []
+def robot(robot):
+    """start(extra args, realtime=False) -> port of a robot on MuJoCo (conftest's robot)."""
 
     def start(*extra: str, realtime: bool = False) -> int:
-        proc, port = start_robot(TOKEN, realtime, ["--plant", "mujoco", *extra], timeout=60.0)
-        procs.append(proc)
-        return port
+        return robot("--plant", "mujoco", *extra, realtime=realtime, timeout=60.0)
 
-    yield start
-    for proc in procs:
-        stop_robot(proc)
+    return start
 
 
 def bridged(system, fmu_dir, port, stop, **kw):

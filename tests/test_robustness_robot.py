@@ -37,24 +37,6 @@ def system(ssp_path):
     return read_ssp(ssp_path)
 
 
-@pytest.fixture
-def robot(tmp_path):
-    """start(*extra, realtime=False) -> port; the robot's stderr goes to start.log (a file)."""
-    procs = []
-
-    def start(*extra: str, realtime: bool = False) -> int:
-        start.log = tmp_path / f"robot{len(procs)}.log"
-        with open(start.log, "w") as err:
-            proc, port = start_robot(TOKEN, realtime, list(extra), timeout=20.0, stderr=err)
-        procs.append(proc)
-        start.proc = proc
-        return port
-
-    yield start
-    for proc in procs:
-        stop_robot(proc)
-
-
 class Peer:
     """A UDP socket talking to the robot the way the bridge (or an intruder) would."""
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 from fmpy_cli import fmpy_cli
+from fmu_steps import output_names, rows_after
 
 from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 from impedance_cosim.packaging.regression import REFERENCES, compare, read_csv
@@ -82,27 +83,20 @@ def test_state_restore_is_bit_identical(fmu_dir, name, inputs):
     """Step, save, step, restore, step again: identical outputs; the same through serialization
     into a second instance."""
     fmu = started(fmu_dir / name, q_noise=1e-4) if name == PLANT else started(fmu_dir / name)
-    outputs = [v.name for v in fmu.description.modelVariables if v.causality == "output"]
+    outputs = output_names(fmu)
     fmu.set(inputs)
     for i in range(40):
         fmu.step(i * DT, DT)
     state = fmu.get_state()
     blob = fmu.serialize_state(state)
 
-    def run() -> list:
-        rows = []
-        for i in range(40, 60):
-            fmu.step(i * DT, DT)
-            rows.append(fmu.get(outputs))
-        return rows
-
-    first = run()
+    first = rows_after(fmu, outputs)
     fmu.set_state(state)
-    assert run() == first
+    assert rows_after(fmu, outputs) == first
     other = started(fmu_dir / name, "y", q_noise=1e-4) if name == PLANT else started(fmu_dir / name)
     other.set_state(other.deserialize_state(blob))
     fmu, fmu_saved = other, fmu
-    assert run() == first
+    assert rows_after(fmu, outputs) == first
     fmu_saved.free_state(state)
     for f in (fmu_saved, other):
         f.terminate()

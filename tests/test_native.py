@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
+from fmu_steps import output_names, rows_after
 
 from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 from impedance_cosim.cosim.master.master import Master
@@ -249,20 +250,13 @@ def test_state_restore_and_serialization(native_dir):
         fmu.step(i * DT, DT)
     state = fmu.get_state()
     blob = fmu.serialize_state(state)
-    outputs = [v.name for v in fmu.description.modelVariables if v.causality == "output"]
+    outputs = output_names(fmu)
 
-    def run() -> list:
-        rows = []
-        for i in range(40, 60):
-            fmu.step(i * DT, DT)
-            rows.append(fmu.get(outputs))
-        return rows
-
-    first = run()
+    first = rows_after(fmu, outputs)
     fmu.set_state(state)
-    assert run() == first
+    assert rows_after(fmu, outputs) == first
     fmu.set_state(fmu.deserialize_state(blob))
-    assert run() == first
+    assert rows_after(fmu, outputs) == first
     with pytest.raises(FmuError, match="serialized state"):
         fmu.deserialize_state(blob[:-8])
     fmu.free_state(state)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 from fmpy_cli import fmpy_cli
+from fmu_steps import output_names, rows_after
 
 from impedance_cosim.cosim.results.result import read_csv
 
@@ -92,26 +93,19 @@ def test_state_restore_in_contact_is_bit_identical(fmu_dir: Path, plant: str):
         fmu.set({"tau1": 30.0, "tau2": 20.0, "tau3": 1.0})
         return fmu
 
-    def run(f) -> list:
-        rows = []
-        for i in range(40, 60):
-            f.step(i / 400, 1 / 400)
-            rows.append(f.get(outputs))
-        return rows
-
     fmu = started("a")
-    outputs = [v.name for v in fmu.description.modelVariables if v.causality == "output"]
+    outputs = output_names(fmu)
     for i in range(40):
         fmu.step(i / 400, 1 / 400)
     state = fmu.get_state()
     blob = fmu.serialize_state(state)
-    first = run(fmu)
+    first = rows_after(fmu, outputs)
     assert max(r[outputs.index("contact_force")] for r in first) > 1.0  # in contact
     fmu.set_state(state)
-    assert run(fmu) == first
+    assert rows_after(fmu, outputs) == first
     other = started("b")
     other.set_state(other.deserialize_state(blob))
-    assert run(other) == first
+    assert rows_after(other, outputs) == first
     fmu.free_state(state)
     for f in (fmu, other):
         f.terminate()

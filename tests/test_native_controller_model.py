@@ -34,69 +34,7 @@ INPUTS = [v.name for v in VARIABLES if v.causality == "input"]
 OUTPUTS = [v.name for v in VARIABLES if v.causality == "output"]
 
 SHIM = r"""
-#include <stdarg.h>
-#include <stdio.h>
-#include <string.h>
 #include "glue.h"
-
-int fail(char *msg, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, MSG_MAX, fmt, ap);
-    va_end(ap);
-    return 1;
-}
-
-size_t data_size(void) { return sizeof(Data); }
-size_t state_size(void) { return sizeof(ModelState); }
-int n_vars(void) { return N_VARS; }
-const char *var_name(int vr) { return VARS[vr].name; }
-double var_start(int vr) { return VARS[vr].start; }
-
-void data_init(Data *d, double start_time)
-{
-    memset(d, 0, sizeof *d);
-    for (int vr = 0; vr < N_VARS; vr++) {
-        if (VARS[vr].type == T_REAL) {
-            d->r[vr] = VARS[vr].start;
-        } else if (VARS[vr].type == T_STRING) {
-            strncpy(d->s[vr], VARS[vr].start_string, STRING_MAX - 1);
-        } else {
-            d->i[vr] = (int)VARS[vr].start;
-        }
-    }
-    d->start_time = start_time;
-}
-
-double *data_r(Data *d) { return d->r; }
-int *data_i(Data *d) { return d->i; }
-void data_set_string(Data *d, int vr, const char *s)
-{
-    memset(d->s[vr], 0, STRING_MAX);
-    strncpy(d->s[vr], s, STRING_MAX - 1);
-}
-
-/* as the glue does: work on a copy, keep it only on success */
-int initialize(Data *d, char *msg)
-{
-    Data tmp = *d;
-    if (model_initialize(&tmp, msg)) {
-        return 1;
-    }
-    *d = tmp;
-    return 0;
-}
-
-int step(Data *d, double t, double h, char *msg)
-{
-    Data tmp = *d;
-    if (model_step(&tmp, t, h, msg)) {
-        return 1;
-    }
-    *d = tmp;
-    return 0;
-}
 
 /* t, start_time, yhat, q_prev, tau_prev, f_prev (14 values); k_next, held_input_samples */
 void state_reals(const Data *d, double out[14])
@@ -112,7 +50,7 @@ void state_reals(const Data *d, double out[14])
 }
 long long state_k_next(const Data *d) { return (long long)d->m.k_next; }
 long long state_held(const Data *d) { return (long long)d->m.held_input_samples; }
-"""
+"""  # the model's own state for ctypes; the rest of the shim is tests/c_host/model_shim.c
 
 
 def _compile(src: list[Path], out: Path, werror: bool) -> None:
@@ -127,12 +65,13 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     tmp = tmp_path_factory.mktemp("native_controller")
     shim = tmp / "shim.c"
     shim.write_text(SHIM)
-    objs = [tmp / "model.o", tmp / "arm_terms.o", tmp / "shim.o", tmp / "pyrepr.o"]
+    objs = [tmp / n for n in ("model.o", "arm_terms.o", "shim.o", "pyrepr.o", "model_shim.o")]
     try:
         _compile([ROOT / "native" / "controller" / "model.c"], objs[0], werror=True)
         _compile([ROOT / "native" / "src" / "arm_terms.c"], objs[1], werror=False)
         _compile([shim], objs[2], werror=True)
         _compile([ROOT / "native" / "src" / "pyrepr.c"], objs[3], werror=True)
+        _compile([ROOT / "tests" / "c_host" / "model_shim.c"], objs[4], werror=True)
     except subprocess.CalledProcessError as exc:
         pytest.fail(f"compilation failed:\n{exc.stderr}")
     so = tmp / "controller_test.so"
@@ -149,8 +88,8 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
         ("data_r", ctypes.POINTER(d), [p]),
         ("data_i", ctypes.POINTER(ctypes.c_int), [p]),
         ("data_set_string", None, [p, ctypes.c_int, ctypes.c_char_p]),
-        ("initialize", ctypes.c_int, [p, ctypes.c_char_p]),
-        ("step", ctypes.c_int, [p, d, d, ctypes.c_char_p]),
+        ("data_initialize", ctypes.c_int, [p, ctypes.c_char_p]),
+        ("data_step", ctypes.c_int, [p, d, d, ctypes.c_char_p]),
         ("state_reals", None, [p, ctypes.POINTER(d)]),
         ("state_k_next", ctypes.c_longlong, [p]),
         ("state_held", ctypes.c_longlong, [p]),
@@ -181,7 +120,7 @@ class Native:
             else:
                 self.r[VR[name]] = value
         self.set_inputs(inputs)
-        if lib.initialize(self.buf, self.msg):
+        if lib.data_initialize(self.buf, self.msg):
             raise ModelError(self.msg.value.decode())
 
     def set_inputs(self, inputs) -> None:
@@ -189,7 +128,7 @@ class Native:
 
     def do_step(self, t: float, h: float, inputs) -> None:
         self.set_inputs(inputs)
-        if self.lib.step(self.buf, t, h, self.msg):
+        if self.lib.data_step(self.buf, t, h, self.msg):
             raise ModelError(self.msg.value.decode())
 
     def outputs(self) -> np.ndarray:

@@ -30,59 +30,9 @@ SOURCES = ["native/plant/model.c", "native/plant/model_me.c", "native/src/wall.c
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror"]
 MSG_MAX = 512
 
-# The test shim: fail() (the real one is in instance.c), and access to Data for ctypes.
+# The model's own state for ctypes; the rest of the shim is tests/c_host/model_shim.c.
 SHIM = r"""
-#include <stdarg.h>
-#include <stdio.h>
-#include <string.h>
 #include "glue.h"
-
-int fail(char *msg, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, MSG_MAX, fmt, ap);
-    va_end(ap);
-    return 1;
-}
-
-size_t data_size(void) { return sizeof(Data); }
-size_t state_size(void) { return sizeof(ModelState); }
-double *data_r(Data *d) { return d->r; }
-int *data_i(Data *d) { return d->i; }
-
-void data_init(Data *d, double start_time)
-{
-    memset(d, 0, sizeof *d);
-    for (int vr = 0; vr < N_VARS; vr++) {
-        if (VARS[vr].type == T_REAL) {
-            d->r[vr] = VARS[vr].start;
-        } else if (VARS[vr].type == T_STRING) {
-            strncpy(d->s[vr], VARS[vr].start_string, STRING_MAX - 1);
-        } else {
-            d->i[vr] = (int)VARS[vr].start;
-        }
-    }
-    d->start_time = start_time;
-}
-
-void data_set_string(Data *d, int vr, const char *s)
-{
-    memset(d->s[vr], 0, STRING_MAX);
-    strncpy(d->s[vr], s, STRING_MAX - 1);
-}
-
-/* like the glue: step a copy, keep it only on success */
-int data_step(Data *d, double t, double h, char *msg)
-{
-    static Data tmp; /* test only: not reentrant */
-    tmp = *d;
-    if (model_step(&tmp, t, h, msg)) {
-        return 1;
-    }
-    *d = tmp;
-    return 0;
-}
 
 /* t, h, in_contact, q[3], qd[3], q_meas[3] */
 void state_get(const Data *d, double out[12])
@@ -112,7 +62,8 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     shim.write_text(SHIM)
     so = tmp / "plant_test.so"
     cmd = ["gcc", *CFLAGS, "-shared", f"-I{REPO / 'native/src'}", f"-I{REPO / 'native/plant'}",
-           *(str(REPO / s) for s in SOURCES), str(shim), "-lm", "-o", str(so)]  # fmt: skip
+           *(str(REPO / s) for s in SOURCES), str(shim),
+           str(REPO / "tests/c_host/model_shim.c"), "-lm", "-o", str(so)]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True)
     assert done.returncode == 0 and done.stderr == "", done.stderr
     lib = ctypes.CDLL(str(so))

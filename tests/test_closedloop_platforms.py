@@ -7,19 +7,17 @@ the platform tests' bounds. Skips without the tools, fails with IMPCOSIM_REQUIRE
 from __future__ import annotations
 
 import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
-from fmpy import read_model_description
 from test_platforms import (  # the same tools and bounds as for the two-FMU loop
     TOLERANCE,
-    host_path,
+    build_host,
+    host_arguments,
     need_compiler,
-    run_command,
+    run_host,
     wine,  # noqa: F401  (a fixture run_command asks for)
 )
 
@@ -42,37 +40,14 @@ def closed_loops(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def run(platform: str, fmi: int, folder: Path, tmp_path: Path, request) -> np.ndarray:
-    """Rows (time, RECORD...) of the observer scenario's closed loop run by the C host."""
-    prefix, env = run_command(platform, request)
-    tmp_path.mkdir(parents=True, exist_ok=True)
-    toolchain = toolchains.BY_PLATFORM[platform]
-    host = Path(__file__).parent / "c_host" / ("host.c" if fmi == 2 else "host3.c")
-    exe = tmp_path / ("host.exe" if platform == "win64" else "host")
-    headers = Path(fmpy.__file__).parent / "c-code"
-    extra = ["-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc"] if platform == "win64" else ["-ldl"]
-    subprocess.run([toolchain.compiler, "-std=c99", "-O2", "-ffp-contract=off", "-Wall",
-                    f"-I{headers}", str(host), *extra, "-o", str(exe)],
-                   check=True, capture_output=True, timeout=120)  # fmt: skip
+    """Rows (time, RECORD...) of the observer scenario's closed loop run by the C host (the one
+    FMU given as both of the host's FMUs, nothing linked)."""
+    exe = build_host(platform, tmp_path, fmi)
     fmu = folder / ("native" if fmi == 2 else "fmi3") / f"{fmu_name('observer')}.fmu"
-    md = read_model_description(str(fmu))
-    unzip = tmp_path / "fmu"
-    with zipfile.ZipFile(fmu) as z:
-        z.extractall(unzip)
-    dirname = platform if fmi == 2 else toolchains.FMI3_PLATFORMS[platform]
-    lib = unzip / "binaries" / dirname / f"{md.coSimulation.modelIdentifier}{toolchain.suffix}"
-    assert lib.is_file(), f"{fmu.name} has no {lib.relative_to(unzip)}"
-    one = [host_path(platform, lib), md.guid]
-    if fmi == 2:
-        resources = "file:///" + host_path(platform, unzip / "resources").lstrip("/")
-        one.append(resources.replace("\\", "/"))
-    vrs = {v.name: v.valueReference for v in md.modelVariables}
+    one, vrs = host_arguments(platform, fmi, fmu, tmp_path / "fmu")
     record = ",".join(f"A{vrs[n]}" for n in RECORD)
-    out = tmp_path / "rows.csv"
-    cmd = [*prefix, str(exe), *one, *one, str(STEPS), "1/400", host_path(platform, out), "",
-           record]  # fmt: skip
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return np.loadtxt(out, delimiter=",")
+    return run_host(platform, exe, [*one, *one], STEPS, "", record, tmp_path / "rows.csv",
+                    request)  # fmt: skip
 
 
 @pytest.mark.parametrize("fmi", [2, 3])

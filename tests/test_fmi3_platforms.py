@@ -7,66 +7,29 @@ platforms' bounds (tests/test_platforms.py, whose tool fixtures this reuses)."""
 from __future__ import annotations
 
 import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
-from fmpy import read_model_description
 from test_platforms import (  # the same tools and bounds as for FMI 2.0
+    RECORD,
     TOLERANCE,
-    host_path,
     need_compiler,
-    run_command,
     wine,  # noqa: F401  (a fixture run_command asks for)
 )
+from test_platforms import closed_loop as two_fmu_loop
 
-from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging import toolchains
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
-HOST = Path(__file__).parent / "c_host" / "host3.c"
 PLANT, CONTROLLER = "PumaPlant.fmu", "ImpedanceController.fmu"
 STEPS = 1600  # 4 s at 400 Hz: free motion, then the first contact (~3.85 s)
-RECORD = [("plant", n) for n in ("x", "y", "contact_force", "q1", "q2", "q3")] + [
-    ("controller", f"tau{i}") for i in (1, 2, 3)
-]
 
 
 def closed_loop(platform: str, fmi3_dir: Path, tmp_path: Path, request) -> np.ndarray:
-    prefix, env = run_command(platform, request)
-    tmp_path.mkdir(parents=True, exist_ok=True)
-    toolchain = toolchains.BY_PLATFORM[platform]
-    exe = tmp_path / ("host3.exe" if platform == "win64" else "host3")
-    headers = Path(fmpy.__file__).parent / "c-code"
-    extra = ["-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc"] if platform == "win64" else ["-ldl"]
-    subprocess.run([toolchain.compiler, "-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra",
-                    "-Werror", f"-I{headers}", str(HOST), *extra, "-o", str(exe)],
-                   check=True, capture_output=True, timeout=120)  # fmt: skip
-    args, vrs = [], {}
-    folder = toolchains.FMI3_PLATFORMS[platform]
-    for key, fmu in (("controller", CONTROLLER), ("plant", PLANT)):  # A, B
-        md = read_model_description(str(fmi3_dir / fmu))
-        unzip = tmp_path / key
-        with zipfile.ZipFile(fmi3_dir / fmu) as z:
-            z.extractall(unzip)
-        vrs[key] = {v.name: v.valueReference for v in md.modelVariables}
-        lib = unzip / "binaries" / folder / f"{md.coSimulation.modelIdentifier}{toolchain.suffix}"
-        assert lib.is_file(), f"{fmu} has no {lib.relative_to(unzip)}"
-        args += [host_path(platform, lib), md.guid]
-    letter = {"controller": "A", "plant": "B"}
-    links = ",".join(
-        f"{letter[se]}{vrs[se][sc]}>{letter[ee]}{vrs[ee][ec]}" for se, sc, ee, ec in CONNECTIONS
-    )
-    record = ",".join(f"{letter[k]}{vrs[k][n]}" for k, n in RECORD)
-    out = tmp_path / f"{platform}.csv"
-    cmd = [*prefix, str(exe), *args, str(STEPS), "1/400", host_path(platform, out), links, record]
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return np.loadtxt(out, delimiter=",")
+    return two_fmu_loop(platform, fmi3_dir, tmp_path, request, fmi=3, steps=STEPS)
 
 
 @pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])

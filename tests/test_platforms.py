@@ -28,6 +28,7 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C c
 
 REQUIRE = os.environ.get("IMPCOSIM_REQUIRE_PLATFORMS") == "1"
 HOST = Path(__file__).parent / "c_host" / "host.c"
+HOST3 = Path(__file__).parent / "c_host" / "host3.c"
 PLANT, CONTROLLER = "PumaPlant.fmu", "ImpedanceController.fmu"
 STEPS = 8000  # 20 s at 400 Hz
 # Worst difference to the linux64 run, relative to each signal's range (measured 2026-12-01):
@@ -99,45 +100,64 @@ def host_path(platform: str, path: Path) -> str:
     return "Z:" + str(path).replace("/", "\\") if platform == "win64" else str(path)
 
 
-def build_host(platform: str, out_dir: Path) -> Path:
-    """Compile the C host for platform with its toolchain."""
+def build_host(platform: str, out_dir: Path, fmi: int = 2) -> Path:
+    """Compile the C host of FMI version fmi (tests/c_host/host.c, host3.c) for platform."""
     toolchain = toolchains.BY_PLATFORM[platform]
+    out_dir.mkdir(parents=True, exist_ok=True)
     exe = out_dir / ("host.exe" if platform == "win64" else "host")
     headers = Path(fmpy.__file__).parent / "c-code"
     extra = ["-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc"] if platform == "win64" else ["-ldl"]
+    host = HOST if fmi == 2 else HOST3
     cmd = [toolchain.compiler, "-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra",
-           "-Werror", f"-I{headers}", str(HOST), *extra, "-o", str(exe)]  # fmt: skip
+           "-Werror", f"-I{headers}", str(host), *extra, "-o", str(exe)]  # fmt: skip
     subprocess.run(cmd, check=True, capture_output=True, timeout=120)
     return exe
 
 
-def closed_loop(platform: str, native_dir: Path, tmp_path: Path, request) -> np.ndarray:
-    """Run the 20 s closed loop with the FMU archives' binaries/<platform>/ libraries in the C
-    host built for platform; return the recorded rows (time, RECORD...)."""
+def host_arguments(platform: str, fmi: int, fmu: Path, unzip: Path) -> tuple[list[str], dict]:
+    """The FMU extracted into unzip: the host's arguments for it (its library for platform, its
+    GUID and, under FMI 2.0, its resources URI) and its value references by name."""
+    md = read_model_description(str(fmu))
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(unzip)
+    toolchain = toolchains.BY_PLATFORM[platform]
+    folder = platform if fmi == 2 else toolchains.FMI3_PLATFORMS[platform]
+    lib = unzip / "binaries" / folder / f"{md.coSimulation.modelIdentifier}{toolchain.suffix}"
+    assert lib.is_file(), f"{fmu.name} has no {lib.relative_to(unzip)}"
+    args = [host_path(platform, lib), md.guid]
+    if fmi == 2:
+        resources = "file:///" + host_path(platform, unzip / "resources").lstrip("/")
+        args.append(resources.replace("\\", "/"))
+    return args, {v.name: v.valueReference for v in md.modelVariables}
+
+
+def run_host(platform: str, exe: Path, args: list[str], steps: int, links: str, record: str,
+             out: Path, request) -> np.ndarray:  # fmt: skip
+    """Run the C host (two FMUs A and B, `steps` steps of 1/400 s, links "A1>B2,...", the
+    recorded variables "A3,B4,...") on platform; its rows (time, recorded...)."""
     prefix, env = run_command(platform, request)
-    exe = build_host(platform, tmp_path)
+    cmd = [*prefix, str(exe), *args, str(steps), "1/400", host_path(platform, out), links, record]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return np.loadtxt(out, delimiter=",")
+
+
+def closed_loop(platform: str, fmu_dir: Path, tmp_path: Path, request, fmi: int = 2,
+                steps: int = STEPS) -> np.ndarray:  # fmt: skip
+    """Run the closed loop (controller + plant) of the FMUs in fmu_dir with the FMU archives'
+    libraries for platform in the C host built for platform; the recorded rows (time, RECORD)."""
+    exe = build_host(platform, tmp_path, fmi)
     args, vrs = [], {}
     for key, fmu in (("controller", CONTROLLER), ("plant", PLANT)):  # A, B
-        md = read_model_description(str(native_dir / fmu))
-        unzip = tmp_path / key
-        with zipfile.ZipFile(native_dir / fmu) as z:
-            z.extractall(unzip)
-        vrs[key] = {v.name: v.valueReference for v in md.modelVariables}
-        toolchain = toolchains.BY_PLATFORM[platform]
-        lib = unzip / "binaries" / platform / f"{md.coSimulation.modelIdentifier}{toolchain.suffix}"
-        assert lib.is_file(), f"{fmu} has no {lib.relative_to(unzip)}"
-        resources = "file:///" + host_path(platform, unzip / "resources").lstrip("/")
-        args += [host_path(platform, lib), md.guid, resources.replace("\\", "/")]
+        one, vrs[key] = host_arguments(platform, fmi, fmu_dir / fmu, tmp_path / key)
+        args += one
     letter = {"controller": "A", "plant": "B"}
     links = ",".join(
         f"{letter[se]}{vrs[se][sc]}>{letter[ee]}{vrs[ee][ec]}" for se, sc, ee, ec in CONNECTIONS
     )
     record = ",".join(f"{letter[k]}{vrs[k][n]}" for k, n in RECORD)
-    out = tmp_path / f"{platform}.csv"
-    cmd = [*prefix, str(exe), *args, str(STEPS), "1/400", host_path(platform, out), links, record]
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return np.loadtxt(out, delimiter=",")
+    return run_host(platform, exe, args, steps, links, record, tmp_path / f"{platform}.csv",
+                    request)  # fmt: skip
 
 
 @pytest.fixture(scope="module")

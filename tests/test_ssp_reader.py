@@ -575,21 +575,13 @@ class _AnythingGoes:
         return True
 
 
-@pytest.mark.parametrize("schema", ["with schema", "without schema"])
-@pytest.mark.slow
-def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
-    archive, tmp_path, private_tmp, monkeypatch, schema
-):
-    """400 mutants from a fixed seed (bytes flipped, truncated, SSD/SSV text mutated, members
-    renamed/dropped/turned into links): each gives a SystemDescription or a one-line SspError.
-    Run a second time with schema validation disabled, so the reader's own checks are fuzzed."""
-    if schema == "without schema":
-        monkeypatch.setattr(ssd, "_schema", lambda name: _AnythingGoes())
-    rng = random.Random(20261201)
-    base = archive.read_bytes()
-    entries = members(archive)
+def mutant_outcomes(archive: Path, seed: int, tmp_path: Path, n: int = 400) -> dict[str, int]:
+    """read_ssp on n mutants of archive (_mutant, from seed): how many gave a SystemDescription
+    ("ok") and how many a one-line SspError; anything else fails the calling test."""
+    rng = random.Random(seed)
+    base, entries = archive.read_bytes(), members(archive)
     failures, outcomes = [], {"ok": 0, "SspError": 0}
-    for case in range(400):
+    for case in range(n):
         path = tmp_path / f"mutant{case % 4}.ssp"
         _mutant(rng, base, entries, path)
         try:
@@ -605,6 +597,20 @@ def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
             outcomes["ok"] += 1
             desc.close()
     assert not failures, failures[:3]
+    return outcomes
+
+
+@pytest.mark.parametrize("schema", ["with schema", "without schema"])
+@pytest.mark.slow
+def test_fuzz_mutated_archives_end_in_a_description_or_an_ssp_error(
+    archive, tmp_path, private_tmp, monkeypatch, schema
+):
+    """400 mutants from a fixed seed (bytes flipped, truncated, SSD/SSV text mutated, members
+    renamed/dropped/turned into links): each gives a SystemDescription or a one-line SspError.
+    Run a second time with schema validation disabled, so the reader's own checks are fuzzed."""
+    if schema == "without schema":
+        monkeypatch.setattr(ssd, "_schema", lambda name: _AnythingGoes())
+    outcomes = mutant_outcomes(archive, 20261201, tmp_path)
     assert outcomes["ok"] >= 5 and outcomes["SspError"] > 100, outcomes  # both paths exercised
     assert leftovers(private_tmp) == []
 

@@ -41,7 +41,8 @@ def stale(target: Path) -> bool:
     sources += [REPO / spec.package for spec in FMUS.values()] + [REPO / "ssp"]
     files = [f for s in sources for f in ([s] if s.is_file() else s.rglob("*"))]
     built = target.stat().st_mtime
-    return any(f.suffix in (".py", ".ssd", ".ssv") and f.stat().st_mtime > built for f in files)
+    suffixes = (".py", ".ssd", ".ssv", ".html", ".txt")  # .html, .txt: a model's documentation
+    return any(f.suffix in suffixes and f.stat().st_mtime > built for f in files)
 
 
 def ensure_built(args: argparse.Namespace, ssp: Path) -> None:

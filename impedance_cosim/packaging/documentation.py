@@ -13,6 +13,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from impedance_cosim.packaging.icons import icon_png
+from impedance_cosim.packaging.model_docs import model_file
 
 REPO = Path(__file__).resolve().parents[2]
 LICENSE_FILE = REPO / "LICENSE"
@@ -44,7 +45,8 @@ def documentation_members(model_description: bytes, members: list[str], flavour:
 
 
 def external_dependencies(model_name: str, flavour: str) -> str:
-    """What the FMU needs outside its archive to load and run (FMI 2.0.x externalDependencies)."""
+    """What the FMU needs outside its archive to load and run (FMI 2.0.x externalDependencies):
+    its flavour's host, and <model folder>/<model name>_dependencies.txt where the model has one."""
     lines = []
     if flavour == "pythonfmu":
         lines.append(
@@ -58,17 +60,9 @@ def external_dependencies(model_name: str, flavour: str) -> str:
             " 0.3.4 wrappers that run resources/*.py in the Python of the process that loads them"
             " (standard library only). For C hosts use the native FMI 3.0 FMUs."
         )
-    if model_name == "MujocoPlant":
-        lines.append(
-            "The Python packages mujoco 4.0.0 (MuJoCo: pip install mujoco==4.0.0) and numpy in"
-            " that Python: the model is MuJoCo stepping the MJCF in resources/ (instantiation"
-            " fails with one line naming the package when it is missing)."
-        )
-    if model_name == "BridgePlant":
-        lines.append(
-            "A robot process answering the UDP protocol of bridge_model/protocol.py at"
-            " robot_host:robot_port (the stand-in: `impedance-cosim robot`)."
-        )
+    needs = model_file(model_name, "_dependencies.txt")  # what this model itself needs
+    if needs is not None:
+        lines.append(needs.strip())
     return "\n\n".join(lines) + "\n" if lines else ""
 
 

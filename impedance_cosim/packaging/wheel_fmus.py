@@ -21,7 +21,7 @@ SOURCES = (
     "impedance_cosim/packaging",
     *("plant_model", "controller_model", "bridge_model", "native", "ssp"),
 )
-SOURCE_SUFFIXES = (".py", ".c", ".h", ".ssd", ".ssv")
+SOURCE_SUFFIXES = (".py", ".c", ".h", ".ssd", ".ssv", ".html", ".txt")  # .html, .txt: model docs
 THIS = Path(__file__).name  # this file decides what goes into the wheel, not what is built
 
 

@@ -17,33 +17,8 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "host_common.h"
 
-#ifdef _WIN32
-#include <windows.h>
-static void *open_library(const char *path) { return (void *)LoadLibraryA(path); }
-static void *library_symbol(void *lib, const char *name)
-{
-    FARPROC f = GetProcAddress((HMODULE)lib, name);
-    void *p;
-    memcpy(&p, &f, sizeof p); /* function pointer to void *, as dlsym returns it */
-    return p;
-}
-static void close_library(void *lib) { FreeLibrary((HMODULE)lib); }
-static const char *library_error(void)
-{
-    static char text[64];
-    snprintf(text, sizeof text, "LoadLibrary failed with error %lu", (unsigned long)GetLastError());
-    return text;
-}
-#else
-#include <dlfcn.h>
-static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
-static void *library_symbol(void *lib, const char *name) { return dlsym(lib, name); }
-static void close_library(void *lib) { dlclose(lib); }
-static const char *library_error(void) { return dlerror(); }
-#endif
-
-#define MAX_LINKS 64
 
 typedef struct {
     void *lib;
@@ -59,11 +34,6 @@ typedef struct {
     fmi2SetRealTYPE *set_real;
 } Fmu;
 
-typedef struct {
-    int from, to;
-    fmi2ValueReference out, in;
-} Link;
-
 static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                    fmi2String category, fmi2String message, ...)
 {
@@ -76,23 +46,9 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
     fputc('\n', stderr);
 }
 
-static void *sym(void *lib, const char *name)
-{
-    void *f = library_symbol(lib, name);
-    if (!f) {
-        fprintf(stderr, "missing symbol %s\n", name);
-        exit(2);
-    }
-    return f;
-}
-
 static void load(Fmu *f, const char *path)
 {
-    f->lib = open_library(path);
-    if (!f->lib) {
-        fprintf(stderr, "loading %s: %s\n", path, library_error());
-        exit(2);
-    }
+    f->lib = load_library(path);
     f->instantiate = (fmi2InstantiateTYPE *)sym(f->lib, "fmi2Instantiate");
     f->free_instance = (fmi2FreeInstanceTYPE *)sym(f->lib, "fmi2FreeInstance");
     f->setup = (fmi2SetupExperimentTYPE *)sym(f->lib, "fmi2SetupExperiment");
@@ -138,12 +94,12 @@ int main(int argc, char **argv)
     Fmu fmus[2];
     Link links[MAX_LINKS];
     int n_links = 0, n_rec = 0, rec_fmu[MAX_LINKS];
-    fmi2ValueReference rec_vr[MAX_LINKS];
+    unsigned int rec_vr[MAX_LINKS]; /* fmi2/fmi3 value references are unsigned int */
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     long steps;
     double h;
     FILE *out;
-    char *spec, *tok;
+    char *tok;
 
     if (argc < 12) {
         fprintf(stderr, "usage: %s A.so GUID_A RES_A B.so GUID_B RES_B STEPS H OUT CONN REC [P]\n",
@@ -151,22 +107,9 @@ int main(int argc, char **argv)
         return 2;
     }
     steps = atol(argv[7]);
-    h = strchr(argv[8], '/') ? atof(argv[8]) / atof(strchr(argv[8], '/') + 1) : atof(argv[8]);
-    for (spec = argv[10], tok = strtok(spec, ","); tok && n_links < MAX_LINKS;
-         tok = strtok(NULL, ",")) {
-        char a, b;
-        unsigned o, i;
-        if (sscanf(tok, "%c%u>%c%u", &a, &o, &b, &i) != 4) {
-            fprintf(stderr, "bad connection %s\n", tok);
-            return 2;
-        }
-        links[n_links++] = (Link){a - 'A', b - 'A', o, i};
-    }
-    for (spec = argv[11], tok = strtok(spec, ","); tok && n_rec < MAX_LINKS;
-         tok = strtok(NULL, ",")) {
-        rec_fmu[n_rec] = tok[0] - 'A';
-        rec_vr[n_rec++] = (fmi2ValueReference)atoi(tok + 1);
-    }
+    h = parse_step(argv[8]);
+    n_links = parse_links(argv[10], links);
+    n_rec = parse_record(argv[11], rec_fmu, rec_vr);
     for (int k = 0; k < 2; k++) {
         load(&fmus[k], argv[1 + 3 * k]);
         fmus[k].c = fmus[k].instantiate(k ? "B" : "A", fmi2CoSimulation, argv[2 + 3 * k],

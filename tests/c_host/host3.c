@@ -15,28 +15,8 @@
 #include <string.h>
 
 #include "fmi3Functions.h"
+#include "host_common.h"
 
-#ifdef _WIN32
-#include <windows.h>
-static void *open_library(const char *path) { return (void *)LoadLibraryA(path); }
-static void *library_symbol(void *lib, const char *name)
-{
-    FARPROC f = GetProcAddress((HMODULE)lib, name);
-    void *p;
-    memcpy(&p, &f, sizeof p); /* function pointer to void *, as dlsym returns it */
-    return p;
-}
-static void close_library(void *lib) { FreeLibrary((HMODULE)lib); }
-static const char *library_error(void) { return "LoadLibrary failed"; }
-#else
-#include <dlfcn.h>
-static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
-static void *library_symbol(void *lib, const char *name) { return dlsym(lib, name); }
-static void close_library(void *lib) { dlclose(lib); }
-static const char *library_error(void) { return dlerror(); }
-#endif
-
-#define MAX_LINKS 64
 
 typedef struct {
     void *lib;
@@ -57,11 +37,6 @@ typedef struct {
     fmi3DeserializeFMUStateTYPE *deserialize;
 } Fmu;
 
-typedef struct {
-    int from, to;
-    fmi3ValueReference out, in;
-} Link;
-
 static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category,
                    fmi3String message)
 {
@@ -69,23 +44,9 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
     fprintf(stderr, "[%d|%s] %s\n", (int)status, category ? category : "", message);
 }
 
-static void *sym(void *lib, const char *name)
-{
-    void *f = library_symbol(lib, name);
-    if (!f) {
-        fprintf(stderr, "missing symbol %s\n", name);
-        exit(2);
-    }
-    return f;
-}
-
 static void load(Fmu *f, const char *path)
 {
-    f->lib = open_library(path);
-    if (!f->lib) {
-        fprintf(stderr, "loading %s: %s\n", path, library_error());
-        exit(2);
-    }
+    f->lib = load_library(path);
     f->instantiate = (fmi3InstantiateCoSimulationTYPE *)sym(f->lib, "fmi3InstantiateCoSimulation");
     f->free_instance = (fmi3FreeInstanceTYPE *)sym(f->lib, "fmi3FreeInstance");
     f->enter_init = (fmi3EnterInitializationModeTYPE *)sym(f->lib, "fmi3EnterInitializationMode");
@@ -156,31 +117,19 @@ int main(int argc, char **argv)
     Fmu fmus[2];
     Link links[MAX_LINKS];
     int n_links = 0, n_rec = 0, rec_fmu[MAX_LINKS];
-    fmi3ValueReference rec_vr[MAX_LINKS];
+    unsigned int rec_vr[MAX_LINKS];
     long steps;
     double h;
     FILE *out;
-    char *tok;
 
     if (argc != 10) {
         fprintf(stderr, "usage: %s A.so TOKEN_A B.so TOKEN_B STEPS H OUT CONN REC\n", argv[0]);
         return 2;
     }
     steps = atol(argv[5]);
-    h = strchr(argv[6], '/') ? atof(argv[6]) / atof(strchr(argv[6], '/') + 1) : atof(argv[6]);
-    for (tok = strtok(argv[8], ","); tok && n_links < MAX_LINKS; tok = strtok(NULL, ",")) {
-        char a, b;
-        unsigned o, i;
-        if (sscanf(tok, "%c%u>%c%u", &a, &o, &b, &i) != 4) {
-            fprintf(stderr, "bad connection %s\n", tok);
-            return 2;
-        }
-        links[n_links++] = (Link){a - 'A', b - 'A', o, i};
-    }
-    for (tok = strtok(argv[9], ","); tok && n_rec < MAX_LINKS; tok = strtok(NULL, ",")) {
-        rec_fmu[n_rec] = tok[0] - 'A';
-        rec_vr[n_rec++] = (fmi3ValueReference)atoi(tok + 1);
-    }
+    h = parse_step(argv[6]);
+    n_links = parse_links(argv[8], links);
+    n_rec = parse_record(argv[9], rec_fmu, rec_vr);
     for (int k = 0; k < 2; k++) {
         load(&fmus[k], argv[1 + 2 * k]);
         fmus[k].c = fmus[k].instantiate(k ? "B" : "A", argv[2 + 2 * k], NULL, fmi3False,

@@ -13,22 +13,8 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "host_common.h"
 
-#ifdef _WIN32
-#include <windows.h>
-static void *open_library(const char *path) { return (void *)LoadLibraryA(path); }
-static void *symbol(void *lib, const char *name)
-{
-    FARPROC f = GetProcAddress((HMODULE)lib, name);
-    void *p;
-    memcpy(&p, &f, sizeof p);
-    return p;
-}
-#else
-#include <dlfcn.h>
-static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
-static void *symbol(void *lib, const char *name) { return dlsym(lib, name); }
-#endif
 
 static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                    fmi2String category, fmi2String message, ...)
@@ -37,7 +23,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
     printf("log %d %s\n", (int)status, message);
 }
 
-#define FN(type, name) type *name = (type *)symbol(lib, #name)
+#define FN(type, name) type *name = (type *)sym(lib, #name)
 
 int main(int argc, char **argv)
 {

@@ -140,6 +140,7 @@ static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Bo
     }
     w->magic = WRAPPER_MAGIC;
     w->kind = kind;
+    w->state = ST_INSTANTIATED;
     w->env = env;
     w->log = log;
     cb.logger = relay;
@@ -164,7 +165,7 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[])
 {
-    WRAP("fmi3SetDebugLogging");
+    WRAP(fmi3SetDebugLogging);
     return status3(instance_set_logging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
                                   categories));
 }
@@ -253,7 +254,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(
 void fmi3FreeInstance(fmi3Instance instance)
 {
     Wrapper *w = wrapper_of(instance, "fmi3FreeInstance");
-    if (!w || !allowed_in_update(w, "fmi3FreeInstance")) {
+    if (!w || !state_allows(w, MASK_fmi3FreeInstance, "fmi3FreeInstance")) {
         return; /* refused inside the intermediate update: fmi3DoStep goes on with w */
     }
     instance_free(w->inner);
@@ -266,51 +267,61 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     fmi2Status s;
-    WRAP("fmi3EnterInitializationMode");
-    if (w->inner->s.phase != S_INSTANTIATED) {
-        return FAIL(w, "fmi3EnterInitializationMode called twice or after initialization");
-    }
+    WRAP(fmi3EnterInitializationMode);
     s = instance_setup(w->inner, toleranceDefined ? fmi2True : fmi2False, tolerance,
                             startTime, stopTimeDefined ? fmi2True : fmi2False, stopTime);
-    if (s != fmi2OK) {
-        return status3(s);
+    if (s == fmi2OK) {
+        s = instance_enter_initialization(w->inner);
     }
-    return status3(instance_enter_initialization(w->inner));
+    if (s == fmi2OK) {
+        w->state = ST_INITIALIZATION;
+    }
+    return status3(s);
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
     fmi3Status s;
-    WRAP("fmi3ExitInitializationMode");
+    WRAP(fmi3ExitInitializationMode);
     s = status3(instance_exit_initialization(w->inner));
-    if (s <= fmi3Warning && w->kind == K_CS && w->event_mode_used) {
-        w->cs_event_mode = 1; /* co-simulation with eventModeUsed: into Event Mode */
+    if (s <= fmi3Warning) { /* co-simulation with eventModeUsed goes into Event Mode */
+        w->state = w->kind == K_ME   ? ST_EVENT
+                   : w->kind == K_SE ? ST_CLOCK_ACTIVATION
+                   : w->event_mode_used ? ST_EVENT
+                                        : ST_STEP;
     }
     return s;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
-    WRAP("fmi3EnterEventMode");
+    fmi3Status s;
+    WRAP(fmi3EnterEventMode);
     if (w->kind == K_CS) {
         return cs_enter_event_mode(w);
     }
-    if (w->kind != K_ME) {
-        return FAIL(w, "fmi3EnterEventMode: this FMU has event mode under Model Exchange only");
+    s = status3(instance_enter_event_mode(w->inner));
+    if (s <= fmi3Warning) {
+        w->state = ST_EVENT;
     }
-    return status3(instance_enter_event_mode(w->inner));
+    return s;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    WRAP("fmi3Terminate");
-    return status3(instance_terminate(w->inner));
+    fmi3Status s;
+    WRAP(fmi3Terminate);
+    s = status3(instance_terminate(w->inner));
+    if (s <= fmi3Warning) {
+        w->state = ST_TERMINATED;
+    }
+    return s;
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
-    WRAP("fmi3Reset");
-    w->cs_event_mode = 0;
+    WRAP(fmi3Reset);
+    w->state = ST_INSTANTIATED;
     return status3(instance_reset(w->inner));
 }
 
@@ -318,39 +329,44 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    WRAP("fmi3GetFMUState");
+    WRAP(fmi3GetFMUState);
     return status3(instance_get_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
-    WRAP("fmi3SetFMUState");
-    return status3(instance_set_state(w->inner, FMUState));
+    fmi3Status s;
+    WRAP(fmi3SetFMUState);
+    s = status3(instance_set_state(w->inner, FMUState));
+    if (s <= fmi3Warning) {
+        w->state = state_of_core(w);
+    }
+    return s;
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    WRAP("fmi3FreeFMUState");
+    WRAP(fmi3FreeFMUState);
     return status3(instance_free_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
-    WRAP("fmi3SerializedFMUStateSize");
+    WRAP(fmi3SerializedFMUStateSize);
     return status3(instance_serialized_size(w->inner, FMUState, size));
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
                                  fmi3Byte serializedState[], size_t size)
 {
-    WRAP("fmi3SerializeFMUState");
+    WRAP(fmi3SerializeFMUState);
     return status3(instance_serialize(w->inner, FMUState, (fmi2Byte *)serializedState, size));
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
                                    size_t size, fmi3FMUState *FMUState)
 {
-    WRAP("fmi3DeserializeFMUState");
+    WRAP(fmi3DeserializeFMUState);
     return status3(instance_deserialize(w->inner, (const fmi2Byte *)serializedState, size,
                                       FMUState));
 }

@@ -53,7 +53,6 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
 static const char *const RENAMES[][2] = {
     {"fmi2NewDiscreteStates", "fmi3UpdateDiscreteStates"},
     {"fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives"},
-    {"fmi2SetupExperiment", "fmi3EnterInitializationMode"},
     {"fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"},
     {"fmi2GetReal", "fmi3GetFloat64"},
     {"fmi2SetReal", "fmi3SetFloat64"},

@@ -3,7 +3,9 @@
  *
  * Phases follow the FMI 2.0 state machines: co-simulation (section 4.2.4) steps in
  * S_STEP_COMPLETE; Model Exchange (section 3.2.3) alternates between S_EVENT_MODE and
- * S_CONTINUOUS_TIME. A model offers Model Exchange when its generated config.h defines
+ * S_CONTINUOUS_TIME. The phase is the core's own (it decides whether outputs are stale, parameters
+ * fixed, initialization done) and the FMI 2.0 glue's state; each glue checks the legality of its
+ * calls itself (fmi2_states.h, fmi3_states.h). A model offers Model Exchange when its generated config.h defines
  * MODEL_EXCHANGE (with N_STATES, N_EVENT_INDICATORS and DERIVATIVE_VRS[]) and its model.c
  * implements the model_me_* functions of model_me.h.
  */

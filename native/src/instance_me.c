@@ -3,8 +3,8 @@
  * (fmi3_events.c).
  *
  * State machine (FMI 2.0, section 3.2.3): instantiated -> initialization mode -> event mode
- * <-> continuous-time mode -> terminated; a call out of order returns fmi2Error with a logged
- * message and changes nothing. The host owns time and the continuous states: fmi2SetTime,
+ * <-> continuous-time mode -> terminated; the glue refuses a call out of order (fmi2_states.h,
+ * fmi3_states.h), the core makes the transitions. The host owns time and the continuous states: fmi2SetTime,
  * fmi2SetContinuousStates and fmi2Set<Type> mark the outputs and derivatives stale, and the next
  * getter recomputes them once (model_me_evaluate). The model's discrete state (the plant's
  * contact mode, the controller's samples) changes only in event mode, in fmi2NewDiscreteStates,
@@ -48,9 +48,9 @@ fmi2Status me_update(Instance *inst)
     return fmi2OK;
 }
 
-/* The instance, if it is a Model Exchange instance in one of the allowed phases (a bit set of
- * 1 << Phase); otherwise log why not and return NULL. */
-static Instance *me_instance(fmi2Component c, unsigned allowed, const char *function)
+/* The instance, if it is a Model Exchange instance (the glue has checked that the call is legal
+ * in its phase); otherwise log why not and return NULL. */
+static Instance *me_instance(fmi2Component c, const char *function)
 {
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, function)) {
@@ -62,19 +62,9 @@ static Instance *me_instance(fmi2Component c, unsigned allowed, const char *func
                     function);
         return NULL;
     }
-    if (!(allowed & (1u << inst->s.phase))) {
-        static const char *const names[] = {"instantiated",      "initialization mode",
-                                            "step complete",     "event mode",
-                                            "continuous-time mode", "terminated"};
-        log_message(inst, fmi2Error, "logStatusError", "%s cannot be called in %s", function,
-                    names[inst->s.phase]);
-        return NULL;
-    }
     return inst;
 }
 
-#define IN(p) (1u << (p))
-#define EVALUATED (IN(S_INITIALIZATION) | IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME) | IN(S_TERMINATED))
 
 /* An array argument of n values where the FMU has expected: NULL or a wrong count is an error. */
 static int bad_array(Instance *inst, const void *array, size_t n, size_t expected,
@@ -107,7 +97,7 @@ static fmi2Status refresh(Instance *inst)
 
 fmi2Status instance_enter_event_mode(fmi2Component c)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2EnterEventMode");
+    Instance *inst = me_instance(c, "fmi2EnterEventMode");
     if (!inst) {
         return fmi2Error;
     }
@@ -118,7 +108,7 @@ fmi2Status instance_enter_event_mode(fmi2Component c)
 
 fmi2Status instance_new_discrete_states(fmi2Component c, fmi2EventInfo *eventInfo)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2NewDiscreteStates");
+    Instance *inst = me_instance(c, "fmi2NewDiscreteStates");
     MeEvent ev = {0, 0, 0, 0.0};
     if (!inst) {
         return fmi2Error;
@@ -148,7 +138,7 @@ fmi2Status instance_new_discrete_states(fmi2Component c, fmi2EventInfo *eventInf
 
 fmi2Status instance_enter_continuous_time_mode(fmi2Component c)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2EnterContinuousTimeMode");
+    Instance *inst = me_instance(c, "fmi2EnterContinuousTimeMode");
     if (!inst) {
         return fmi2Error;
     }
@@ -161,7 +151,7 @@ fmi2Status instance_completed_integrator_step(fmi2Component c,
                                        fmi2Boolean *enterEventMode,
                                        fmi2Boolean *terminateSimulation)
 {
-    Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2CompletedIntegratorStep");
+    Instance *inst = me_instance(c, "fmi2CompletedIntegratorStep");
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!inst) {
         return fmi2Error;
@@ -178,7 +168,7 @@ fmi2Status instance_completed_integrator_step(fmi2Component c,
 
 fmi2Status instance_set_time(fmi2Component c, fmi2Real time)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2SetTime");
+    Instance *inst = me_instance(c, "fmi2SetTime");
     if (!inst) {
         return fmi2Error;
     }
@@ -194,7 +184,7 @@ fmi2Status instance_set_time(fmi2Component c, fmi2Real time)
 
 fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], size_t nx)
 {
-    Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2SetContinuousStates");
+    Instance *inst = me_instance(c, "fmi2SetContinuousStates");
     if (!inst) {
         return fmi2Error;
     }
@@ -214,7 +204,7 @@ fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], s
 
 fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t nx)
 {
-    Instance *inst = me_instance(c, EVALUATED, "fmi2GetContinuousStates");
+    Instance *inst = me_instance(c, "fmi2GetContinuousStates");
     fmi2Status status;
     if (!inst) {
         return fmi2Error;
@@ -232,8 +222,7 @@ fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t 
 
 fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
-    Instance *inst = me_instance(c, IN(S_INSTANTIATED) | EVALUATED,
-                                 "fmi2GetNominalsOfContinuousStates");
+    Instance *inst = me_instance(c, "fmi2GetNominalsOfContinuousStates");
     if (!inst) {
         return fmi2Error;
     }
@@ -250,7 +239,7 @@ fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t n
 
 fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
-    Instance *inst = me_instance(c, EVALUATED, "fmi2GetDerivatives");
+    Instance *inst = me_instance(c, "fmi2GetDerivatives");
     fmi2Status status;
     if (!inst) {
         return fmi2Error;
@@ -272,7 +261,7 @@ fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], siz
 
 fmi2Status instance_get_event_indicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
 {
-    Instance *inst = me_instance(c, EVALUATED, "fmi2GetEventIndicators");
+    Instance *inst = me_instance(c, "fmi2GetEventIndicators");
     fmi2Status status;
     if (!inst) {
         return fmi2Error;

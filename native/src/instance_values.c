@@ -53,13 +53,7 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
                 return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
                              v->name);
             }
-            if (inst->s.phase == S_TERMINATED) {
-                return ERROR(inst, "variable %s cannot be set after fmi2Terminate", v->name);
-            }
         }
-    }
-    if (!setting && inst->s.phase == S_INSTANTIATED && nvr > 0) {
-        return ERROR(inst, "values can be read only from initialization mode on");
     }
     if (!setting && inst->s.dirty && inst->s.phase == S_INITIALIZATION && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);

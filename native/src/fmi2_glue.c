@@ -19,6 +19,7 @@ int legal2(Instance *inst, unsigned mask, const char *function)
     if (!instance_ok(inst, function)) {
         return 0;
     }
+    inst->fn = function; /* the core's messages name it */
     if (mask & IN2(inst->s.phase)) {
         return 1;
     }

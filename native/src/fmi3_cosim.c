@@ -30,6 +30,7 @@ static const char *state_name(State3 state)
 
 int state_allows(Wrapper *w, unsigned mask, const char *function)
 {
+    w->inner->fn = function; /* the core's messages name it */
     if (mask & (unsigned)w->state) {
         return 1;
     }

@@ -15,7 +15,6 @@
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <string.h>
 
 #include "fmi3Functions.h"
 #include "glue.h"
@@ -49,23 +48,8 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
     return model_step(d, t, h, msg);
 }
 
-/* FMI 2 function names in the inner layer's messages, as the FMI 3 host knows them. */
-static const char *const RENAMES[][2] = {
-    {"fmi2NewDiscreteStates", "fmi3UpdateDiscreteStates"},
-    {"fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives"},
-    {"fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"},
-    {"fmi2GetReal", "fmi3GetFloat64"},
-    {"fmi2SetReal", "fmi3SetFloat64"},
-    {"fmi2GetInteger", "fmi3GetInt32"},
-    {"fmi2SetInteger", "fmi3SetInt32"},
-    {"FMUstate", "FMUState"},
-    {"fmi2", "fmi3"},
-    {"of type Real", "of type Float64"},
-    {"of type Integer", "of type Int32"},
-};
-
 /* The inner layer's logger: passes the message on to the FMI 3 callback (which is not
- * printf-style, so the inner layer's doubled '%' is undone) with FMI 3 function names. */
+ * printf-style, so the inner layer's doubled '%' is undone). */
 static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                   fmi2String category, fmi2String message, ...)
 {
@@ -77,22 +61,6 @@ static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status stat
         return;
     }
     for (const char *p = message; *p && k + 1 < sizeof text;) {
-        size_t r, n = sizeof RENAMES / sizeof RENAMES[0];
-        for (r = 0; r < n; r++) {
-            size_t len = strlen(RENAMES[r][0]);
-            if (strncmp(p, RENAMES[r][0], len) == 0) {
-                size_t add = strlen(RENAMES[r][1]);
-                if (k + add + 1 < sizeof text) {
-                    memcpy(text + k, RENAMES[r][1], add);
-                    k += add;
-                }
-                p += len;
-                break;
-            }
-        }
-        if (r < n) {
-            continue;
-        }
         if (p[0] == '%' && p[1] == '%') {
             p++;
         }
@@ -154,6 +122,7 @@ static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Bo
         free(w);
         return NULL;
     }
+    w->inner->type_names = FMI3_TYPE_NAMES;
     return w;
 }
 

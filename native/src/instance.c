@@ -1,6 +1,6 @@
 /* The instance core of every native model, written once (see glue.h and instance.h): what the
  * FMI 2.0 glue (fmi2_glue.c) and the FMI 3.0 glue (fmi3_*.c) both call. Its messages name the
- * FMI 2.0 functions; the FMI 3.0 glue's logger renames them. Here: the lifecycle and the step;
+ * glue's entry point and types (Instance.fn, type_names). Here: the lifecycle and the step;
  * the getters and setters are in instance_values.c, the FMU state in instance_state.c.
  *
  * The phase follows the FMI 2.0 state machine (section 4.2.4): instantiated -> initialization
@@ -64,6 +64,19 @@ void log_message(Instance *inst, fmi2Status status, const char *category, const 
     }
     safe[k] = '\0';
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
+}
+
+const char *const FMI2_TYPE_NAMES[] = {"Real", "Integer", "Boolean", "String"};
+const char *const FMI3_TYPE_NAMES[] = {"Float64", "Int32", "Boolean", "String"};
+
+void log_fn_error(Instance *inst, const char *fmt, ...)
+{
+    char text[MSG_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    log_message(inst, fmi2Error, "logStatusError", "%s: %s", inst->fn, text);
 }
 
 int instance_ok(const Instance *inst, const char *function)
@@ -179,6 +192,8 @@ fmi2Component instance_new(fmi2String instanceName, fmi2Type fmuType, fmi2String
     strncpy(inst->name, instanceName ? instanceName : "", sizeof inst->name - 1);
     inst->logging_on = loggingOn;
     inst->type = fmuType;
+    inst->fn = "fmi2Instantiate";
+    inst->type_names = FMI2_TYPE_NAMES;
     if (fmuType != fmi2CoSimulation && !(fmuType == fmi2ModelExchange && ME_SUPPORTED)) {
         log_message(inst, fmi2Error, "logStatusError", "%s supports co-simulation only",
                     MODEL_IDENTIFIER_STR);
@@ -302,7 +317,7 @@ fmi2Status instance_do_step(fmi2Component c, fmi2Real currentCommunicationPoint,
         return fmi2Error;
     }
     if (!isfinite(currentCommunicationPoint)) { /* NaN would pass the model's time check */
-        return ERROR(inst, "fmi2DoStep: communication point %g is not finite",
+        return ERROR_FN(inst, "communication point %g is not finite",
                      currentCommunicationPoint);
     }
     /* A model step writes only the model state and the outputs: back those up, restore them if

@@ -1,9 +1,9 @@
 /* The FMI 3.0 interface of every native model (Co-Simulation, Model Exchange and, for a model
  * with a sample clock, Scheduled Execution), over the instance core (instance.c, instance_me.c)
  * that the FMI 2.0 glue calls too (so do fmi3_events.c: Model Exchange and the clock, and
- * fmi3_stubs.c: what is not provided): one set of checks (parameters, non-finite inputs, call
- * order, FMU-state validation) and one FMU-state format for both standards. What FMI 3 adds is
- * here: the `independent` time variable (value reference VR_TIME, read-only), the nValues
+ * fmi3_stubs.c: what is not provided): one set of checks (parameters, non-finite inputs,
+ * FMU-state validation) and one FMU-state format for both standards. The call order is checked
+ * here, against the FMI 3.0 state machine (fmi3_states.h, WRAP). What FMI 3 adds is here: the `independent` time variable (value reference VR_TIME, read-only), the nValues
  * argument, fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra
  * results, and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an
  * event of the model's Model Exchange side at that time: the samples due are taken, outputs

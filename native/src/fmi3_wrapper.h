@@ -1,7 +1,8 @@
 /* The FMI 3.0 instance of the native FMUs, shared by fmi3_glue.c (lifecycle,
  * values, FMU state, co-simulation), fmi3_events.c (Model Exchange, the clock of Scheduled
  * Execution) and fmi3_stubs.c (what these FMUs do not provide). A Wrapper holds the instance of
- * the instance core (instance.h), which has all the state, and what FMI 3.0 adds to it. */
+ * the instance core (instance.h), which has the model's state, and what FMI 3.0 adds to it: its
+ * state in the FMI 3.0 state machine (fmi3_states.h), the importer's choices and callbacks. */
 #ifndef FMI3_WRAPPER_H
 #define FMI3_WRAPPER_H
 
@@ -18,7 +19,7 @@ typedef enum { K_ME, K_CS, K_SE } Kind;
 
 typedef struct {
     unsigned magic; /* WRAPPER_MAGIC while alive; fmi3FreeInstance clears it */
-    Instance *inner; /* the instance core's instance (instance.c): all the state */
+    Instance *inner; /* the instance core's instance (instance.c): the model's state */
     Kind kind;
     State3 state; /* where the instance is in the FMI 3.0 state machine */
     fmi3InstanceEnvironment env;

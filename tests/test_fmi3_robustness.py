@@ -83,11 +83,11 @@ class Fmu3:
 def test_calls_in_the_wrong_order_are_errors(fmi3_dir):
     p = Fmu3(fmi3_dir / PLANT)
     assert p.step(0.0) == ERROR
-    assert "fmi3DoStep called before initialization finished" in p.log[-1]
+    assert "fmi3DoStep called in Instantiated" in p.log[-1]
     assert p.get64(["x"])[0] == ERROR  # nothing to read before initialization mode
     p.fmu.enterInitializationMode(startTime=0.0)
     assert p.raw("fmi3EnterInitializationMode", False, 0.0, 0.0, False, 0.0) == ERROR
-    assert "called twice" in p.log[-1]
+    assert "fmi3EnterInitializationMode called in Initialization Mode" in p.log[-1]
     p.fmu.exitInitializationMode()
     assert p.raw("fmi3EnterEventMode") == ERROR  # co-simulation without event mode
     assert p.raw("fmi3EnterStepMode") == ERROR
@@ -164,7 +164,7 @@ def test_interfaces_not_offered_are_refused(fmi3_dir):
     assert c.raw("fmi3ActivateModelPartition", clock, float("nan")) == ERROR
     assert c.raw("fmi3ActivateModelPartition", clock, 0.0) == 0
     assert c.raw("fmi3ActivateModelPartition", clock, -DT) == ERROR  # time going back
-    assert c.step(0.0) == ERROR and "not for co-simulation" in c.log[-1]
+    assert c.step(0.0) == ERROR and "called in Clock Activation Mode" in c.log[-1]
     c.close()
     me = Fmu3(fmi3_dir / PLANT, cls=FMU3Model)
     me.init()
@@ -250,7 +250,7 @@ def _check_free_in_update(out: str) -> None:
     calls = int(out.split("callbacks=")[1].split()[0])
     assert calls >= 2, out  # the wrist closes and opens contact in the 2 s step
     assert "step=0 get=0 step_after=0" in out, out
-    refusals = out.count("fmi3FreeInstance called inside the intermediate update callback")
+    refusals = out.count("fmi3FreeInstance called in Intermediate Update Mode")
     assert refusals == calls, out
 
 

@@ -178,14 +178,14 @@ def _status(fmu: FmuInstance, function: str, *args) -> int:
 def test_calls_in_the_wrong_order_are_errors(native_dir):
     fmu = _instance(native_dir)
     assert _status(fmu, "fmi2DoStep", 0.0, DT, 1) == 3  # before initialization
-    assert "before initialization" in fmu.errors()[-1]
+    assert "fmi2DoStep cannot be called in instantiated" in fmu.errors()[-1]
     fmu.enter_initialization()
     fmu.exit_initialization()
     fmu.step(0.0, DT)
     with pytest.raises(FmuError, match="cannot be set after initialization"):
         fmu.set({"m1": 2.0})
     fmu.terminate()
-    with pytest.raises(FmuError, match="after fmi2Terminate"):
+    with pytest.raises(FmuError, match="fmi2SetReal cannot be called in terminated"):
         fmu.set({"tau1": 1.0})
     assert _status(fmu, "fmi2DoStep", DT, DT, 1) == 3
     fmu.free()

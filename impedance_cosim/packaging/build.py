@@ -194,7 +194,7 @@ NATIVE_SHARED = ("glue.h", "instance.h", "instance.c", "instance_values.c", "ins
                  "pyrepr.c", "pyrepr.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",
                  "model_partials.h")  # fmt: skip
-FMI2_GLUE = ("fmi2_glue.c", "fmi2_me.c")  # the exported fmi2* functions
+FMI2_GLUE = ("fmi2_glue.c", "fmi2_me.c", "fmi2_states.h")  # the fmi2* functions, their states
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 

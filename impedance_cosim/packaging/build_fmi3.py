@@ -51,6 +51,7 @@ FMI3_GLUE = (
     "fmi3_cosim.c",  # fmi3DoStep: early return, intermediate update, event mode in CS
     "fmi3_stubs.c",
     "fmi3_wrapper.h",
+    "fmi3_states.h",  # the FMI 3.0 states and each function's legal ones
 )
 SAMPLE_CLOCK = SampleClock(
     "sample_clock",

@@ -12,23 +12,46 @@
 
 #include "fmi3_wrapper.h"
 
-static const char *const UPDATE_GETTERS[] = {"fmi3GetFloat64", "fmi3GetInt32", "fmi3GetInt64",
-                                             "fmi3GetBoolean", "fmi3GetString"};
-
-int allowed_in_update(Wrapper *w, const char *function)
+static const char *state_name(State3 state)
 {
-    if (!w->in_update) {
+    switch (state) {
+    case ST_INSTANTIATED: return "Instantiated";
+    case ST_INITIALIZATION: return "Initialization Mode";
+    case ST_EVENT: return "Event Mode";
+    case ST_CONTINUOUS_TIME: return "Continuous-Time Mode";
+    case ST_STEP: return "Step Mode";
+    case ST_CLOCK_ACTIVATION: return "Clock Activation Mode";
+    case ST_INTERMEDIATE_UPDATE:
+        return "Intermediate Update Mode (inside the intermediate update callback)";
+    case ST_TERMINATED: return "Terminated";
+    }
+    return "an unknown state";
+}
+
+int state_allows(Wrapper *w, unsigned mask, const char *function)
+{
+    w->inner->fn = function; /* the core's messages name it */
+    if (mask & (unsigned)w->state) {
         return 1;
     }
-    for (size_t k = 0; k < sizeof UPDATE_GETTERS / sizeof UPDATE_GETTERS[0]; k++) {
-        if (strcmp(function, UPDATE_GETTERS[k]) == 0) {
-            return 1;
-        }
-    }
-    log_message(w->inner, fmi2Error, "logStatusError",
-                "%s called inside the intermediate update callback: only fmi3Get{VariableType} "
-                "of the outputs is allowed there (no input is requested)", function);
+    log_message(w->inner, fmi2Error, "logStatusError", "%s called in %s: not allowed there",
+                function, state_name(w->state));
     return 0;
+}
+
+/* The core's phase, restored with its Snapshot, in FMI 3 terms; Co-Simulation's Event Mode is
+ * not part of the Snapshot (it lies between steps, at the same core phase as Step Mode). */
+State3 state_of_core(const Wrapper *w)
+{
+    switch (w->inner->s.phase) {
+    case S_INSTANTIATED: return ST_INSTANTIATED;
+    case S_INITIALIZATION: return ST_INITIALIZATION;
+    case S_STEP_COMPLETE: return w->state == ST_EVENT ? ST_EVENT : ST_STEP;
+    case S_EVENT_MODE: return w->kind == K_SE ? ST_CLOCK_ACTIVATION : ST_EVENT;
+    case S_CONTINUOUS_TIME: return ST_CONTINUOUS_TIME;
+    case S_TERMINATED: break;
+    }
+    return ST_TERMINATED;
 }
 
 /* Co-Simulation fmi3EnterEventMode: from Step Mode, where the importer used event mode. */
@@ -37,11 +60,7 @@ fmi3Status cs_enter_event_mode(Wrapper *w)
     if (!w->event_mode_used) {
         return FAIL(w, "fmi3EnterEventMode: the instance was created with eventModeUsed=false");
     }
-    if (w->inner->s.phase != S_STEP_COMPLETE || w->cs_event_mode) {
-        return FAIL(w, "fmi3EnterEventMode: allowed in Step Mode only (after "
-                       "fmi3ExitInitializationMode and fmi3EnterStepMode)");
-    }
-    w->cs_event_mode = 1;
+    w->state = ST_EVENT;
     return fmi3OK;
 }
 
@@ -54,10 +73,6 @@ fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeed
                                      fmi3Boolean *nextEventTimeDefined,
                                      fmi3Float64 *nextEventTime)
 {
-    if (!w->cs_event_mode) {
-        return FAIL(w, "fmi3UpdateDiscreteStates: allowed in Event Mode only (call "
-                       "fmi3EnterEventMode first)");
-    }
     if (!discreteStatesNeedUpdate || !terminateSimulation || !nominalsOfContinuousStatesChanged ||
         !valuesOfContinuousStatesChanged || !nextEventTimeDefined || !nextEventTime) {
         return FAIL(w, "fmi3UpdateDiscreteStates: NULL output argument");
@@ -73,14 +88,11 @@ fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeed
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
 {
-    WRAP("fmi3EnterStepMode");
-    if (w->kind != K_CS || !w->event_mode_used) {
+    WRAP(fmi3EnterStepMode);
+    if (w->kind != K_CS) {
         return FAIL(w, "fmi3EnterStepMode: only for co-simulation with eventModeUsed=true");
     }
-    if (!w->cs_event_mode) {
-        return FAIL(w, "fmi3EnterStepMode: allowed in Event Mode only (already in Step Mode)");
-    }
-    w->cs_event_mode = 0;
+    w->state = ST_STEP;
     return fmi3OK;
 }
 
@@ -93,10 +105,10 @@ static int intermediate_update(Wrapper *w, double t)
     if (!w->update) {
         return 0;
     }
-    w->in_update = 1;
+    w->state = ST_INTERMEDIATE_UPDATE;
     w->update(w->env, t, fmi3False, fmi3True, fmi3True, w->early_allowed ? fmi3True : fmi3False,
               &requested, &when);
-    w->in_update = 0;
+    w->state = ST_STEP;
     return w->early_allowed && requested;
 }
 
@@ -111,15 +123,9 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     const double t_end = currentCommunicationPoint + communicationStepSize;
     ModelState backup_m; /* a step that fails past a switch is undone whole (fmi3Discard) */
     double backup_r[N_VARS];
-    WRAP("fmi3DoStep");
-    if (w->kind != K_CS) {
-        return FAIL(w, "fmi3DoStep: this instance is not for co-simulation");
-    }
+    WRAP(fmi3DoStep);
     if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime) {
         return FAIL(w, "fmi3DoStep: NULL output argument");
-    }
-    if (w->cs_event_mode) {
-        return FAIL(w, "fmi3DoStep called in Event Mode: call fmi3EnterStepMode first");
     }
     *eventHandlingNeeded = fmi3False;
     *terminateSimulation = fmi3False;

@@ -34,14 +34,10 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
                                   size_t nValueReferences, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[])
 {
-    WRAP("fmi3GetIntervalDecimal");
+    WRAP(fmi3GetIntervalDecimal);
     if (!clocks_only(w, valueReferences, nValueReferences, intervals, "fmi3GetIntervalDecimal") ||
         (nValueReferences > 0 && !qualifiers)) {
         return fmi3Error;
-    }
-    if (nValueReferences > 0 && w->inner->s.phase == S_INSTANTIATED) {
-        return FAIL(w, "fmi3GetIntervalDecimal: the interval is known from initialization mode "
-                       "on (it is the parameter sample_period)");
     }
     for (size_t k = 0; k < nValueReferences; k++) {
 #if HAS_CLOCK
@@ -55,7 +51,7 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, fmi3Float64 shifts[])
 {
-    WRAP("fmi3GetShiftDecimal");
+    WRAP(fmi3GetShiftDecimal);
     if (!clocks_only(w, valueReferences, nValueReferences, shifts, "fmi3GetShiftDecimal")) {
         return fmi3Error;
     }
@@ -70,7 +66,7 @@ fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
                                    size_t nValueReferences, fmi3UInt64 counters[],
                                    fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
 {
-    WRAP("fmi3GetIntervalFraction");
+    WRAP(fmi3GetIntervalFraction);
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions,
         (void)qualifiers;
     return FAIL(w, "the clock interval is given as a decimal only (supportsFraction=false)");
@@ -80,7 +76,7 @@ fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
                                 size_t nValueReferences, fmi3UInt64 counters[],
                                 fmi3UInt64 resolutions[])
 {
-    WRAP("fmi3GetShiftFraction");
+    WRAP(fmi3GetShiftFraction);
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
     return FAIL(w, "the clock shift is given as a decimal only (supportsFraction=false)");
 }
@@ -88,7 +84,7 @@ fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 intervals[])
 {
-    WRAP("fmi3SetIntervalDecimal");
+    WRAP(fmi3SetIntervalDecimal);
     (void)valueReferences, (void)nValueReferences, (void)intervals;
     return FAIL(w, "the clock interval is fixed by the parameter sample_period");
 }
@@ -98,7 +94,7 @@ fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
                                    size_t nValueReferences, const fmi3UInt64 counters[],
                                    const fmi3UInt64 resolutions[])
 {
-    WRAP("fmi3SetIntervalFraction");
+    WRAP(fmi3SetIntervalFraction);
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
     return FAIL(w, "the clock interval is fixed by the parameter sample_period");
 }
@@ -106,7 +102,7 @@ fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, const fmi3Float64 shifts[])
 {
-    WRAP("fmi3SetShiftDecimal");
+    WRAP(fmi3SetShiftDecimal);
     (void)valueReferences, (void)nValueReferences, (void)shifts;
     return FAIL(w, "the clock has no shift to set");
 }
@@ -115,7 +111,7 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
                                 size_t nValueReferences, const fmi3UInt64 counters[],
                                 const fmi3UInt64 resolutions[])
 {
-    WRAP("fmi3SetShiftFraction");
+    WRAP(fmi3SetShiftFraction);
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
     return FAIL(w, "the clock has no shift to set");
 }
@@ -125,16 +121,9 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
 {
     fmi2EventInfo ev;
     fmi2Status s;
-    WRAP("fmi3ActivateModelPartition");
-    if (w->kind != K_SE) {
-        return FAIL(w, "fmi3ActivateModelPartition: this instance is not for Scheduled Execution");
-    }
+    WRAP(fmi3ActivateModelPartition);
     if (!clocks_only(w, &clockReference, 1, &clockReference, "fmi3ActivateModelPartition")) {
         return fmi3Error;
-    }
-    if (w->inner->s.phase != S_EVENT_MODE) {
-        return FAIL(w, "fmi3ActivateModelPartition called before fmi3ExitInitializationMode or "
-                       "after fmi3Terminate");
     }
     if (!isfinite(activationTime) || activationTime < w->inner->s.last_time) {
         return FAIL(w, "fmi3ActivateModelPartition: activation time %.17g is not finite or "
@@ -160,16 +149,12 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 {
     fmi2EventInfo ev;
     fmi2Status s;
-    WRAP("fmi3UpdateDiscreteStates");
+    WRAP(fmi3UpdateDiscreteStates);
     if (w->kind == K_CS) {
         return cs_update_discrete_states(w, discreteStatesNeedUpdate, terminateSimulation,
                                          nominalsOfContinuousStatesChanged,
                                          valuesOfContinuousStatesChanged, nextEventTimeDefined,
                                          nextEventTime);
-    }
-    if (w->kind != K_ME) {
-        return FAIL(w, "fmi3UpdateDiscreteStates: this FMU has event mode under Model "
-                       "Exchange only");
     }
     s = instance_new_discrete_states(w->inner, &ev);
     if (s != fmi2OK) {
@@ -199,8 +184,13 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
 {
-    WRAP("fmi3EnterContinuousTimeMode");
-    return status3(instance_enter_continuous_time_mode(w->inner));
+    fmi3Status s;
+    WRAP(fmi3EnterContinuousTimeMode);
+    s = status3(instance_enter_continuous_time_mode(w->inner));
+    if (s <= fmi3Warning) {
+        w->state = ST_CONTINUOUS_TIME;
+    }
+    return s;
 }
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
@@ -210,7 +200,7 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
 {
     fmi2Boolean enter = fmi2False, stop = fmi2False;
     fmi2Status s;
-    WRAP("fmi3CompletedIntegratorStep");
+    WRAP(fmi3CompletedIntegratorStep);
     if (!enterEventMode || !terminateSimulation) {
         return FAIL(w, "fmi3CompletedIntegratorStep: NULL output argument");
     }
@@ -222,48 +212,48 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
 {
-    WRAP("fmi3SetTime");
+    WRAP(fmi3SetTime);
     return status3(instance_set_time(w->inner, time));
 }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
                                    size_t nContinuousStates)
 {
-    WRAP("fmi3SetContinuousStates");
+    WRAP(fmi3SetContinuousStates);
     return status3(instance_set_continuous_states(w->inner, continuousStates, nContinuousStates));
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
                                              size_t nContinuousStates)
 {
-    WRAP("fmi3GetContinuousStateDerivatives");
+    WRAP(fmi3GetContinuousStateDerivatives);
     return status3(instance_get_derivatives(w->inner, derivatives, nContinuousStates));
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
                                   size_t nEventIndicators)
 {
-    WRAP("fmi3GetEventIndicators");
+    WRAP(fmi3GetEventIndicators);
     return status3(instance_get_event_indicators(w->inner, eventIndicators, nEventIndicators));
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
                                    size_t nContinuousStates)
 {
-    WRAP("fmi3GetContinuousStates");
+    WRAP(fmi3GetContinuousStates);
     return status3(instance_get_continuous_states(w->inner, continuousStates, nContinuousStates));
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates)
 {
-    WRAP("fmi3GetNominalsOfContinuousStates");
+    WRAP(fmi3GetNominalsOfContinuousStates);
     return status3(instance_get_nominals(w->inner, nominals, nContinuousStates));
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
 {
-    WRAP("fmi3GetNumberOfEventIndicators");
+    WRAP(fmi3GetNumberOfEventIndicators);
     if (!nEventIndicators) {
         return FAIL(w, "fmi3GetNumberOfEventIndicators: NULL output argument");
     }
@@ -277,7 +267,7 @@ fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventI
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates)
 {
-    WRAP("fmi3GetNumberOfContinuousStates");
+    WRAP(fmi3GetNumberOfContinuousStates);
     if (!nContinuousStates) {
         return FAIL(w, "fmi3GetNumberOfContinuousStates: NULL output argument");
     }

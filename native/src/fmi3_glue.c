@@ -1,9 +1,9 @@
 /* The FMI 3.0 interface of every native model (Co-Simulation, Model Exchange and, for a model
  * with a sample clock, Scheduled Execution), over the instance core (instance.c, instance_me.c)
  * that the FMI 2.0 glue calls too (so do fmi3_events.c: Model Exchange and the clock, and
- * fmi3_stubs.c: what is not provided): one set of checks (parameters, non-finite inputs, call
- * order, FMU-state validation) and one FMU-state format for both standards. What FMI 3 adds is
- * here: the `independent` time variable (value reference VR_TIME, read-only), the nValues
+ * fmi3_stubs.c: what is not provided): one set of checks (parameters, non-finite inputs,
+ * FMU-state validation) and one FMU-state format for both standards. The call order is checked
+ * here, against the FMI 3.0 state machine (fmi3_states.h, WRAP). What FMI 3 adds is here: the `independent` time variable (value reference VR_TIME, read-only), the nValues
  * argument, fmi3Boolean (bool) arrays, the log callback without instance name, fmi3DoStep's extra
  * results, and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an
  * event of the model's Model Exchange side at that time: the samples due are taken, outputs
@@ -15,7 +15,6 @@
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <string.h>
 
 #include "fmi3Functions.h"
 #include "glue.h"
@@ -49,24 +48,8 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
     return model_step(d, t, h, msg);
 }
 
-/* FMI 2 function names in the inner layer's messages, as the FMI 3 host knows them. */
-static const char *const RENAMES[][2] = {
-    {"fmi2NewDiscreteStates", "fmi3UpdateDiscreteStates"},
-    {"fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives"},
-    {"fmi2SetupExperiment", "fmi3EnterInitializationMode"},
-    {"fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"},
-    {"fmi2GetReal", "fmi3GetFloat64"},
-    {"fmi2SetReal", "fmi3SetFloat64"},
-    {"fmi2GetInteger", "fmi3GetInt32"},
-    {"fmi2SetInteger", "fmi3SetInt32"},
-    {"FMUstate", "FMUState"},
-    {"fmi2", "fmi3"},
-    {"of type Real", "of type Float64"},
-    {"of type Integer", "of type Int32"},
-};
-
 /* The inner layer's logger: passes the message on to the FMI 3 callback (which is not
- * printf-style, so the inner layer's doubled '%' is undone) with FMI 3 function names. */
+ * printf-style, so the inner layer's doubled '%' is undone). */
 static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                   fmi2String category, fmi2String message, ...)
 {
@@ -78,22 +61,6 @@ static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status stat
         return;
     }
     for (const char *p = message; *p && k + 1 < sizeof text;) {
-        size_t r, n = sizeof RENAMES / sizeof RENAMES[0];
-        for (r = 0; r < n; r++) {
-            size_t len = strlen(RENAMES[r][0]);
-            if (strncmp(p, RENAMES[r][0], len) == 0) {
-                size_t add = strlen(RENAMES[r][1]);
-                if (k + add + 1 < sizeof text) {
-                    memcpy(text + k, RENAMES[r][1], add);
-                    k += add;
-                }
-                p += len;
-                break;
-            }
-        }
-        if (r < n) {
-            continue;
-        }
         if (p[0] == '%' && p[1] == '%') {
             p++;
         }
@@ -140,6 +107,7 @@ static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Bo
     }
     w->magic = WRAPPER_MAGIC;
     w->kind = kind;
+    w->state = ST_INSTANTIATED;
     w->env = env;
     w->log = log;
     cb.logger = relay;
@@ -154,6 +122,7 @@ static Wrapper *instantiate(Kind kind, fmi3String name, fmi3String token, fmi3Bo
         free(w);
         return NULL;
     }
+    w->inner->type_names = FMI3_TYPE_NAMES;
     return w;
 }
 
@@ -164,7 +133,7 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[])
 {
-    WRAP("fmi3SetDebugLogging");
+    WRAP(fmi3SetDebugLogging);
     return status3(instance_set_logging(w->inner, loggingOn ? fmi2True : fmi2False, nCategories,
                                   categories));
 }
@@ -253,7 +222,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(
 void fmi3FreeInstance(fmi3Instance instance)
 {
     Wrapper *w = wrapper_of(instance, "fmi3FreeInstance");
-    if (!w || !allowed_in_update(w, "fmi3FreeInstance")) {
+    if (!w || !state_allows(w, MASK_fmi3FreeInstance, "fmi3FreeInstance")) {
         return; /* refused inside the intermediate update: fmi3DoStep goes on with w */
     }
     instance_free(w->inner);
@@ -266,51 +235,61 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     fmi2Status s;
-    WRAP("fmi3EnterInitializationMode");
-    if (w->inner->s.phase != S_INSTANTIATED) {
-        return FAIL(w, "fmi3EnterInitializationMode called twice or after initialization");
-    }
+    WRAP(fmi3EnterInitializationMode);
     s = instance_setup(w->inner, toleranceDefined ? fmi2True : fmi2False, tolerance,
                             startTime, stopTimeDefined ? fmi2True : fmi2False, stopTime);
-    if (s != fmi2OK) {
-        return status3(s);
+    if (s == fmi2OK) {
+        s = instance_enter_initialization(w->inner);
     }
-    return status3(instance_enter_initialization(w->inner));
+    if (s == fmi2OK) {
+        w->state = ST_INITIALIZATION;
+    }
+    return status3(s);
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
     fmi3Status s;
-    WRAP("fmi3ExitInitializationMode");
+    WRAP(fmi3ExitInitializationMode);
     s = status3(instance_exit_initialization(w->inner));
-    if (s <= fmi3Warning && w->kind == K_CS && w->event_mode_used) {
-        w->cs_event_mode = 1; /* co-simulation with eventModeUsed: into Event Mode */
+    if (s <= fmi3Warning) { /* co-simulation with eventModeUsed goes into Event Mode */
+        w->state = w->kind == K_ME   ? ST_EVENT
+                   : w->kind == K_SE ? ST_CLOCK_ACTIVATION
+                   : w->event_mode_used ? ST_EVENT
+                                        : ST_STEP;
     }
     return s;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
-    WRAP("fmi3EnterEventMode");
+    fmi3Status s;
+    WRAP(fmi3EnterEventMode);
     if (w->kind == K_CS) {
         return cs_enter_event_mode(w);
     }
-    if (w->kind != K_ME) {
-        return FAIL(w, "fmi3EnterEventMode: this FMU has event mode under Model Exchange only");
+    s = status3(instance_enter_event_mode(w->inner));
+    if (s <= fmi3Warning) {
+        w->state = ST_EVENT;
     }
-    return status3(instance_enter_event_mode(w->inner));
+    return s;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    WRAP("fmi3Terminate");
-    return status3(instance_terminate(w->inner));
+    fmi3Status s;
+    WRAP(fmi3Terminate);
+    s = status3(instance_terminate(w->inner));
+    if (s <= fmi3Warning) {
+        w->state = ST_TERMINATED;
+    }
+    return s;
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
-    WRAP("fmi3Reset");
-    w->cs_event_mode = 0;
+    WRAP(fmi3Reset);
+    w->state = ST_INSTANTIATED;
     return status3(instance_reset(w->inner));
 }
 
@@ -318,39 +297,44 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    WRAP("fmi3GetFMUState");
+    WRAP(fmi3GetFMUState);
     return status3(instance_get_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
-    WRAP("fmi3SetFMUState");
-    return status3(instance_set_state(w->inner, FMUState));
+    fmi3Status s;
+    WRAP(fmi3SetFMUState);
+    s = status3(instance_set_state(w->inner, FMUState));
+    if (s <= fmi3Warning) {
+        w->state = state_of_core(w);
+    }
+    return s;
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    WRAP("fmi3FreeFMUState");
+    WRAP(fmi3FreeFMUState);
     return status3(instance_free_state(w->inner, FMUState));
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
-    WRAP("fmi3SerializedFMUStateSize");
+    WRAP(fmi3SerializedFMUStateSize);
     return status3(instance_serialized_size(w->inner, FMUState, size));
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
                                  fmi3Byte serializedState[], size_t size)
 {
-    WRAP("fmi3SerializeFMUState");
+    WRAP(fmi3SerializeFMUState);
     return status3(instance_serialize(w->inner, FMUState, (fmi2Byte *)serializedState, size));
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
                                    size_t size, fmi3FMUState *FMUState)
 {
-    WRAP("fmi3DeserializeFMUState");
+    WRAP(fmi3DeserializeFMUState);
     return status3(instance_deserialize(w->inner, (const fmi2Byte *)serializedState, size,
                                       FMUState));
 }

@@ -8,7 +8,7 @@
     fmi3Status get(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
                    size_t nValueReferences, type values[], size_t nValues)                     \
     {                                                                                          \
-        WRAP(#get);                                                                            \
+        WRAP(get);                                                                            \
         (void)valueReferences, (void)values, (void)nValues;                                    \
         return nValueReferences ? FAIL(w, "%s: this FMU has no %s variables", #get, name)      \
                                 : fmi3OK;                                                      \
@@ -16,7 +16,7 @@
     fmi3Status set(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
                    size_t nValueReferences, const type values[], size_t nValues)               \
     {                                                                                          \
-        WRAP(#set);                                                                            \
+        WRAP(set);                                                                            \
         (void)valueReferences, (void)values, (void)nValues;                                    \
         return nValueReferences ? FAIL(w, "%s: this FMU has no %s variables", #set, name)      \
                                 : fmi3OK;                                                      \
@@ -34,7 +34,7 @@ fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
                          size_t nValueReferences, size_t valueSizes[], fmi3Binary values[],
                          size_t nValues)
 {
-    WRAP("fmi3GetBinary");
+    WRAP(fmi3GetBinary);
     (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
     return nValueReferences ? FAIL(w, "fmi3GetBinary: this FMU has no Binary variables") : fmi3OK;
 }
@@ -43,7 +43,7 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
                          size_t nValueReferences, const size_t valueSizes[],
                          const fmi3Binary values[], size_t nValues)
 {
-    WRAP("fmi3SetBinary");
+    WRAP(fmi3SetBinary);
     (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
     return nValueReferences ? FAIL(w, "fmi3SetBinary: this FMU has no Binary variables") : fmi3OK;
 }
@@ -52,7 +52,7 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Clock values[])
 {
-    WRAP("fmi3GetClock");
+    WRAP(fmi3GetClock);
     (void)valueReferences, (void)values;
     return nValueReferences ? FAIL(w, "fmi3GetClock: this FMU has no output clocks") : fmi3OK;
 }
@@ -60,7 +60,7 @@ fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueRef
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, const fmi3Clock values[])
 {
-    WRAP("fmi3SetClock");
+    WRAP(fmi3SetClock);
     (void)valueReferences, (void)values;
     return nValueReferences ? FAIL(w, "fmi3SetClock: clocks are activated with "
                                       "fmi3ActivateModelPartition (Scheduled Execution)")
@@ -71,7 +71,7 @@ fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
                                                fmi3ValueReference valueReference,
                                                size_t *nDependencies)
 {
-    WRAP("fmi3GetNumberOfVariableDependencies");
+    WRAP(fmi3GetNumberOfVariableDependencies);
     (void)valueReference, (void)nDependencies;
     return FAIL(w, "variable dependencies are given in modelDescription.xml only");
 }
@@ -83,7 +83,7 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
                                        fmi3DependencyKind dependencyKinds[],
                                        size_t nDependencies)
 {
-    WRAP("fmi3GetVariableDependencies");
+    WRAP(fmi3GetVariableDependencies);
     (void)dependent, (void)elementIndicesOfDependent, (void)independents,
         (void)elementIndicesOfIndependents, (void)dependencyKinds, (void)nDependencies;
     return FAIL(w, "variable dependencies are given in modelDescription.xml only");
@@ -95,10 +95,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
                                         size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
                                         fmi3Float64 sensitivity[], size_t nSensitivity)
 {
-    WRAP("fmi3GetDirectionalDerivative");
-    if (w->kind == K_SE) {
-        return FAIL(w, "fmi3GetDirectionalDerivative: not provided in Scheduled Execution");
-    }
+    WRAP(fmi3GetDirectionalDerivative);
     if (nSeed != nKnowns || nSensitivity != nUnknowns) { /* every variable is a scalar */
         return FAIL(w, "fmi3GetDirectionalDerivative: nSeed (%zu) must equal nKnowns (%zu) and"
                        " nSensitivity (%zu) nUnknowns (%zu): the variables are scalars",
@@ -113,7 +110,7 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueRefere
                                     size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
                                     fmi3Float64 sensitivity[], size_t nSensitivity)
 {
-    WRAP("fmi3GetAdjointDerivative");
+    WRAP(fmi3GetAdjointDerivative);
     (void)unknowns, (void)nUnknowns, (void)knowns, (void)nKnowns, (void)seed, (void)nSeed,
         (void)sensitivity, (void)nSensitivity;
     return FAIL(w, "adjoint derivatives are not provided");
@@ -121,13 +118,13 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueRefere
 
 fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance)
 {
-    WRAP("fmi3EnterConfigurationMode");
+    WRAP(fmi3EnterConfigurationMode);
     return FAIL(w, "this FMU has no structural parameters (no configuration mode)");
 }
 
 fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance)
 {
-    WRAP("fmi3ExitConfigurationMode");
+    WRAP(fmi3ExitConfigurationMode);
     return FAIL(w, "this FMU has no structural parameters (no configuration mode)");
 }
 
@@ -136,7 +133,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance,
                                     size_t nValueReferences, const fmi3Int32 orders[],
                                     fmi3Float64 values[], size_t nValues)
 {
-    WRAP("fmi3GetOutputDerivatives");
+    WRAP(fmi3GetOutputDerivatives);
     if (nValues != nValueReferences) { /* every variable is a scalar */
         return FAIL(w, "fmi3GetOutputDerivatives: nValues (%zu) must equal nValueReferences"
                        " (%zu): the variables are scalars", nValues, nValueReferences);
@@ -148,7 +145,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance,
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
 {
-    WRAP("fmi3EvaluateDiscreteStates");
+    WRAP(fmi3EvaluateDiscreteStates);
     return FAIL(w, "fmi3EvaluateDiscreteStates is not provided "
                    "(providesEvaluateDiscreteStates=false)");
 }

@@ -50,9 +50,6 @@ static fmi3Status get_extra(Wrapper *w, fmi3ValueReference vr, double *value)
 #if N_EVENT_INDICATORS > 0
     if (vr >= VR_INDICATOR && vr < VR_INDICATOR + N_EVENT_INDICATORS) {
         double z[N_EVENT_INDICATORS];
-        if (w->inner->s.phase == S_INSTANTIATED) {
-            return FAIL(w, "values can be read only from initialization mode on");
-        }
         if (model_me_event_indicators(&w->inner->s.d, z, w->inner->msg)) {
             return FAIL(w, "%s", w->inner->msg);
         }
@@ -66,7 +63,7 @@ static fmi3Status get_extra(Wrapper *w, fmi3ValueReference vr, double *value)
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues)
 {
-    WRAP("fmi3GetFloat64");
+    WRAP(fmi3GetFloat64);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetFloat64")) {
         return fmi3Error;
     }
@@ -92,7 +89,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
 {
-    WRAP("fmi3SetFloat64");
+    WRAP(fmi3SetFloat64);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetFloat64")) {
         return fmi3Error;
     }
@@ -113,7 +110,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Int32 values[], size_t nValues)
 {
-    WRAP("fmi3GetInt32");
+    WRAP(fmi3GetInt32);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt32")) {
         return fmi3Error;
     }
@@ -124,7 +121,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
 fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, const fmi3Int32 values[], size_t nValues)
 {
-    WRAP("fmi3SetInt32");
+    WRAP(fmi3SetInt32);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt32")) {
         return fmi3Error;
     }
@@ -137,7 +134,7 @@ fmi3Status fmi3GetInt64(fmi3Instance instance, const fmi3ValueReference valueRef
                         size_t nValueReferences, fmi3Int64 values[], size_t nValues)
 {
     fmi2Integer buf[64];
-    WRAP("fmi3GetInt64");
+    WRAP(fmi3GetInt64);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt64")) {
         return fmi3Error;
     }
@@ -160,7 +157,7 @@ fmi3Status fmi3SetInt64(fmi3Instance instance, const fmi3ValueReference valueRef
 {
     fmi2Integer *buf;
     fmi2Status s;
-    WRAP("fmi3SetInt64");
+    WRAP(fmi3SetInt64);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt64")) {
         return fmi3Error;
     }
@@ -190,7 +187,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                           size_t nValueReferences, fmi3Boolean values[], size_t nValues)
 {
     fmi2Boolean buf[64];
-    WRAP("fmi3GetBoolean");
+    WRAP(fmi3GetBoolean);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetBoolean")) {
         return fmi3Error;
     }
@@ -213,7 +210,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
 {
     fmi2Boolean *buf;
     fmi2Status s;
-    WRAP("fmi3SetBoolean");
+    WRAP(fmi3SetBoolean);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetBoolean")) {
         return fmi3Error;
     }
@@ -236,7 +233,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
 fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, fmi3String values[], size_t nValues)
 {
-    WRAP("fmi3GetString");
+    WRAP(fmi3GetString);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetString")) {
         return fmi3Error;
     }
@@ -247,7 +244,7 @@ fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueRe
 fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, const fmi3String values[], size_t nValues)
 {
-    WRAP("fmi3SetString");
+    WRAP(fmi3SetString);
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetString")) {
         return fmi3Error;
     }

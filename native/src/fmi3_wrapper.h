@@ -1,13 +1,15 @@
 /* The FMI 3.0 instance of the native FMUs, shared by fmi3_glue.c (lifecycle,
  * values, FMU state, co-simulation), fmi3_events.c (Model Exchange, the clock of Scheduled
  * Execution) and fmi3_stubs.c (what these FMUs do not provide). A Wrapper holds the instance of
- * the instance core (instance.h), which has all the state, and what FMI 3.0 adds to it. */
+ * the instance core (instance.h), which has the model's state, and what FMI 3.0 adds to it: its
+ * state in the FMI 3.0 state machine (fmi3_states.h), the importer's choices and callbacks. */
 #ifndef FMI3_WRAPPER_H
 #define FMI3_WRAPPER_H
 
 #include "fmi3Functions.h"
 #include "glue.h"
 #include "instance.h"
+#include "fmi3_states.h" /* State3, MASK_<function> */
 #include "fmi3_config.h" /* VR_TIME, VR_INDICATOR; HAS_CLOCK, VR_CLOCK, CLOCK_PERIOD_VR;
                             HAS_EARLY_RETURN: written by the build */
 
@@ -17,8 +19,9 @@ typedef enum { K_ME, K_CS, K_SE } Kind;
 
 typedef struct {
     unsigned magic; /* WRAPPER_MAGIC while alive; fmi3FreeInstance clears it */
-    Instance *inner; /* the instance core's instance (instance.c): all the state */
+    Instance *inner; /* the instance core's instance (instance.c): the model's state */
     Kind kind;
+    State3 state; /* where the instance is in the FMI 3.0 state machine */
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
     int early_return; /* co-simulation: the model step stops at each switch (model_step_early) */
@@ -26,8 +29,6 @@ typedef struct {
     StepWork work;    /* the current fmi3DoStep's work so far, across its model steps */
     int early_allowed;  /* the importer's earlyReturnAllowed */
     int event_mode_used; /* the importer's eventModeUsed */
-    int cs_event_mode;   /* co-simulation, eventModeUsed: in Event Mode (else Step Mode) */
-    int in_update;       /* inside the importer's intermediate update callback */
     fmi3IntermediateUpdateCallback update; /* the importer's, or NULL */
 } Wrapper;
 
@@ -37,16 +38,18 @@ fmi3Status status3(fmi2Status s);
  * the host's logger lives in the instance and cannot be trusted then). */
 Wrapper *wrapper_of(fmi3Instance instance, const char *function);
 
-/* First line of every entry point: w, or return fmi3Error. */
+/* First line of every entry point: w, or return fmi3Error where instance is not live or the
+ * function is not legal in its state (MASK_<function>, fmi3_states.h). */
 #define WRAP(function)                                                                         \
-    Wrapper *w = wrapper_of(instance, function);                                               \
-    if (!w || !allowed_in_update(w, function)) {                                               \
+    Wrapper *w = wrapper_of(instance, #function);                                              \
+    if (!w || !state_allows(w, MASK_##function, #function)) {                                  \
         return fmi3Error;                                                                      \
     }
 
-/* 1 unless w is inside the intermediate update callback and function is not a getter of
- * variable values (the only calls the standard allows there; logged). */
-int allowed_in_update(Wrapper *w, const char *function);
+/* fmi3_cosim.c: 1 if w's state is in mask, else 0 after logging the function and the state. */
+int state_allows(Wrapper *w, unsigned mask, const char *function);
+/* fmi3_cosim.c: the state after the instance core's Snapshot was restored (fmi3SetFMUState). */
+State3 state_of_core(const Wrapper *w);
 /* fmi3_glue.c: the model step of fmi3DoStep (model_step, or with early return on, one that stops
  * at the next discrete-state switch) */
 int model_step_fmi3(Data *d, double t, double h, char *msg);

@@ -1,10 +1,11 @@
 /* The instance core of every native model, written once (see glue.h and instance.h): what the
  * FMI 2.0 glue (fmi2_glue.c) and the FMI 3.0 glue (fmi3_*.c) both call. Its messages name the
- * FMI 2.0 functions; the FMI 3.0 glue's logger renames them. Here: the lifecycle and the step;
+ * glue's entry point and types (Instance.fn, type_names). Here: the lifecycle and the step;
  * the getters and setters are in instance_values.c, the FMU state in instance_state.c.
  *
- * State machine (FMI 2.0, section 4.2.4): instantiated -> initialization mode -> step complete
- * -> terminated; a call out of order returns fmi2Error with a logged message and changes nothing.
+ * The phase follows the FMI 2.0 state machine (section 4.2.4): instantiated -> initialization
+ * mode -> step complete -> terminated. Whether a call is legal in the phase is the glue's to
+ * decide (fmi2_states.h, fmi3_states.h): the core makes the transitions its callers ask for.
  * Errors are always logged (whatever fmi2SetDebugLogging says); other messages only with logging
  * on. Parameter values are checked when set (finite, >= min) and again before initialization;
  * non-finite inputs are refused when set. A step that cannot be taken, or whose outputs would not
@@ -63,6 +64,19 @@ void log_message(Instance *inst, fmi2Status status, const char *category, const 
     }
     safe[k] = '\0';
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, safe);
+}
+
+const char *const FMI2_TYPE_NAMES[] = {"Real", "Integer", "Boolean", "String"};
+const char *const FMI3_TYPE_NAMES[] = {"Float64", "Int32", "Boolean", "String"};
+
+void log_fn_error(Instance *inst, const char *fmt, ...)
+{
+    char text[MSG_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    log_message(inst, fmi2Error, "logStatusError", "%s: %s", inst->fn, text);
 }
 
 int instance_ok(const Instance *inst, const char *function)
@@ -178,6 +192,8 @@ fmi2Component instance_new(fmi2String instanceName, fmi2Type fmuType, fmi2String
     strncpy(inst->name, instanceName ? instanceName : "", sizeof inst->name - 1);
     inst->logging_on = loggingOn;
     inst->type = fmuType;
+    inst->fn = "fmi2Instantiate";
+    inst->type_names = FMI2_TYPE_NAMES;
     if (fmuType != fmi2CoSimulation && !(fmuType == fmi2ModelExchange && ME_SUPPORTED)) {
         log_message(inst, fmi2Error, "logStatusError", "%s supports co-simulation only",
                     MODEL_IDENTIFIER_STR);
@@ -229,9 +245,6 @@ fmi2Status instance_setup(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Rea
     if (!instance_ok(inst, "fmi2SetupExperiment")) {
         return fmi2Error;
     }
-    if (inst->s.phase != S_INSTANTIATED) {
-        return ERROR(inst, "fmi2SetupExperiment must come before fmi2EnterInitializationMode");
-    }
     if (!isfinite(startTime)) {
         return ERROR(inst, "start time must be finite");
     }
@@ -247,9 +260,6 @@ fmi2Status instance_enter_initialization(fmi2Component c)
     if (!instance_ok(inst, "fmi2EnterInitializationMode")) {
         return fmi2Error;
     }
-    if (inst->s.phase != S_INSTANTIATED) {
-        return ERROR(inst, "fmi2EnterInitializationMode called twice or after initialization");
-    }
     inst->s.phase = S_INITIALIZATION;
     inst->s.dirty = 1;
     return fmi2OK;
@@ -260,9 +270,6 @@ fmi2Status instance_exit_initialization(fmi2Component c)
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2ExitInitializationMode")) {
         return fmi2Error;
-    }
-    if (inst->s.phase != S_INITIALIZATION) {
-        return ERROR(inst, "fmi2ExitInitializationMode called outside initialization mode");
     }
     if (inst->s.dirty && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);
@@ -276,9 +283,6 @@ fmi2Status instance_terminate(fmi2Component c)
     Instance *inst = (Instance *)c;
     if (!instance_ok(inst, "fmi2Terminate")) {
         return fmi2Error;
-    }
-    if (inst->s.phase < S_STEP_COMPLETE || inst->s.phase == S_TERMINATED) {
-        return ERROR(inst, "fmi2Terminate called before initialization finished or twice");
     }
     inst->s.phase = S_TERMINATED;
     return fmi2OK;
@@ -312,12 +316,8 @@ fmi2Status instance_do_step(fmi2Component c, fmi2Real currentCommunicationPoint,
     if (!instance_ok(inst, "fmi2DoStep")) {
         return fmi2Error;
     }
-    if (inst->s.phase != S_STEP_COMPLETE) {
-        return ERROR(inst, "fmi2DoStep called before initialization finished or after "
-                           "fmi2Terminate");
-    }
     if (!isfinite(currentCommunicationPoint)) { /* NaN would pass the model's time check */
-        return ERROR(inst, "fmi2DoStep: communication point %g is not finite",
+        return ERROR_FN(inst, "communication point %g is not finite",
                      currentCommunicationPoint);
     }
     /* A model step writes only the model state and the outputs: back those up, restore them if

@@ -3,7 +3,9 @@
  *
  * Phases follow the FMI 2.0 state machines: co-simulation (section 4.2.4) steps in
  * S_STEP_COMPLETE; Model Exchange (section 3.2.3) alternates between S_EVENT_MODE and
- * S_CONTINUOUS_TIME. A model offers Model Exchange when its generated config.h defines
+ * S_CONTINUOUS_TIME. The phase is the core's own (it decides whether outputs are stale, parameters
+ * fixed, initialization done) and the FMI 2.0 glue's state; each glue checks the legality of its
+ * calls itself (fmi2_states.h, fmi3_states.h). A model offers Model Exchange when its generated config.h defines
  * MODEL_EXCHANGE (with N_STATES, N_EVENT_INDICATORS and DERIVATIVE_VRS[]) and its model.c
  * implements the model_me_* functions of model_me.h.
  */
@@ -40,10 +42,17 @@ typedef struct {
     char name[128];
     int logging_on;
     fmi2Type type; /* fmi2CoSimulation or fmi2ModelExchange */
+    const char *fn; /* the glue's entry point being served (set by its state check): messages
+                       name it */
+    const char *const *type_names; /* the glue's names of VarType (Real or Float64, ...) */
     int step_refused; /* the last fmi2DoStep returned fmi2Discard: fmi2Terminated is true then
                          (the same step would be refused again; not part of an FMU state) */
     char msg[MSG_MAX];
 } Instance;
+
+/* VarType's names in FMI 2.0 (instance_new's default) and FMI 3.0 (set by the FMI 3 glue) */
+extern const char *const FMI2_TYPE_NAMES[];
+extern const char *const FMI3_TYPE_NAMES[];
 
 /* Initialize the instance's Data from its parameters and inputs (model_initialize, and under
  * Model Exchange me_initialize; instance.c): 0, or 1 with the reason in inst->msg. */
@@ -57,6 +66,9 @@ int check_parameter(int vr, double value, char *msg);
 void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...);
 
 #define ERROR(inst, ...) (log_message((inst), fmi2Error, "logStatusError", __VA_ARGS__), fmi2Error)
+/* An error naming the entry point being served: "<inst->fn>: <message>". */
+void log_fn_error(Instance *inst, const char *fmt, ...);
+#define ERROR_FN(inst, ...) (log_fn_error((inst), __VA_ARGS__), fmi2Error)
 
 /* Every entry point first checks that c is a live instance of this FMU: not NULL, and carrying
  * INSTANCE_MAGIC, which fmi2FreeInstance clears. This catches a second fmi2FreeInstance and most
@@ -76,8 +88,8 @@ fmi2Status me_update(Instance *inst);
 #include "model_me.h" /* ME_SUPPORTED, the model_me_* functions */
 
 /* The instance core (instance.c), called by the FMI 2.0 glue (fmi2_glue.c: each fmi2* function
- * calls the one named after it) and by the FMI 3.0 glue (fmi3_*.c). Messages name the FMI 2.0
- * functions; the FMI 3.0 glue's logger names its own. */
+ * calls the one named after it) and by the FMI 3.0 glue (fmi3_*.c). Messages name the glue's
+ * entry point (inst->fn) and types (inst->type_names). */
 typedef int (*Stepper)(Data *d, double t, double h, char *msg); /* model_step, or a variant */
 fmi2Component instance_new(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                            fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,

@@ -3,8 +3,8 @@
  * (fmi3_events.c).
  *
  * State machine (FMI 2.0, section 3.2.3): instantiated -> initialization mode -> event mode
- * <-> continuous-time mode -> terminated; a call out of order returns fmi2Error with a logged
- * message and changes nothing. The host owns time and the continuous states: fmi2SetTime,
+ * <-> continuous-time mode -> terminated; the glue refuses a call out of order (fmi2_states.h,
+ * fmi3_states.h), the core makes the transitions. The host owns time and the continuous states: fmi2SetTime,
  * fmi2SetContinuousStates and fmi2Set<Type> mark the outputs and derivatives stale, and the next
  * getter recomputes them once (model_me_evaluate). The model's discrete state (the plant's
  * contact mode, the controller's samples) changes only in event mode, in fmi2NewDiscreteStates,
@@ -48,46 +48,36 @@ fmi2Status me_update(Instance *inst)
     return fmi2OK;
 }
 
-/* The instance, if it is a Model Exchange instance in one of the allowed phases (a bit set of
- * 1 << Phase); otherwise log why not and return NULL. */
-static Instance *me_instance(fmi2Component c, unsigned allowed, const char *function)
+/* The instance, if it is a Model Exchange instance (the glue has checked that the call is legal
+ * in its phase); otherwise log why not and return NULL. */
+static Instance *me_instance(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, function)) {
+    if (!instance_ok(inst, "a Model Exchange function")) {
         return NULL;
     }
     if (inst->type != fmi2ModelExchange) {
         log_message(inst, fmi2Error, "logStatusError",
                     "%s is a Model Exchange function, but this instance is for co-simulation",
-                    function);
-        return NULL;
-    }
-    if (!(allowed & (1u << inst->s.phase))) {
-        static const char *const names[] = {"instantiated",      "initialization mode",
-                                            "step complete",     "event mode",
-                                            "continuous-time mode", "terminated"};
-        log_message(inst, fmi2Error, "logStatusError", "%s cannot be called in %s", function,
-                    names[inst->s.phase]);
+                    inst->fn);
         return NULL;
     }
     return inst;
 }
 
-#define IN(p) (1u << (p))
-#define EVALUATED (IN(S_INITIALIZATION) | IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME) | IN(S_TERMINATED))
 
 /* An array argument of n values where the FMU has expected: NULL or a wrong count is an error. */
 static int bad_array(Instance *inst, const void *array, size_t n, size_t expected,
-                     const char *function, const char *what)
+                     const char *what)
 {
     if (n > 0 && !array) {
-        log_message(inst, fmi2Error, "logStatusError", "%s: the %s array is NULL", function,
+        log_message(inst, fmi2Error, "logStatusError", "%s: the %s array is NULL", inst->fn,
                     what);
         return 1;
     }
     if (n != expected) {
         log_message(inst, fmi2Error, "logStatusError", "%s: %lu %s given, this FMU has %lu",
-                    function, (unsigned long)n, what, (unsigned long)expected);
+                    inst->fn, (unsigned long)n, what, (unsigned long)expected);
         return 1;
     }
     return 0;
@@ -107,7 +97,7 @@ static fmi2Status refresh(Instance *inst)
 
 fmi2Status instance_enter_event_mode(fmi2Component c)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2EnterEventMode");
+    Instance *inst = me_instance(c);
     if (!inst) {
         return fmi2Error;
     }
@@ -118,13 +108,13 @@ fmi2Status instance_enter_event_mode(fmi2Component c)
 
 fmi2Status instance_new_discrete_states(fmi2Component c, fmi2EventInfo *eventInfo)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2NewDiscreteStates");
+    Instance *inst = me_instance(c);
     MeEvent ev = {0, 0, 0, 0.0};
     if (!inst) {
         return fmi2Error;
     }
     if (!eventInfo) {
-        return ERROR(inst, "fmi2NewDiscreteStates: eventInfo is NULL");
+        return ERROR_FN(inst, "eventInfo is NULL");
     }
     if (model_me_event_update(&inst->s.d, now(inst), &ev, inst->msg)) {
         return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
@@ -148,7 +138,7 @@ fmi2Status instance_new_discrete_states(fmi2Component c, fmi2EventInfo *eventInf
 
 fmi2Status instance_enter_continuous_time_mode(fmi2Component c)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE), "fmi2EnterContinuousTimeMode");
+    Instance *inst = me_instance(c);
     if (!inst) {
         return fmi2Error;
     }
@@ -161,13 +151,13 @@ fmi2Status instance_completed_integrator_step(fmi2Component c,
                                        fmi2Boolean *enterEventMode,
                                        fmi2Boolean *terminateSimulation)
 {
-    Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2CompletedIntegratorStep");
+    Instance *inst = me_instance(c);
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!inst) {
         return fmi2Error;
     }
     if (!enterEventMode || !terminateSimulation) {
-        return ERROR(inst, "fmi2CompletedIntegratorStep: NULL output argument");
+        return ERROR_FN(inst, "NULL output argument");
     }
     *enterEventMode = fmi2False; /* no step events: the contact is found by event indicators */
     *terminateSimulation = fmi2False;
@@ -178,12 +168,12 @@ fmi2Status instance_completed_integrator_step(fmi2Component c,
 
 fmi2Status instance_set_time(fmi2Component c, fmi2Real time)
 {
-    Instance *inst = me_instance(c, IN(S_EVENT_MODE) | IN(S_CONTINUOUS_TIME), "fmi2SetTime");
+    Instance *inst = me_instance(c);
     if (!inst) {
         return fmi2Error;
     }
     if (!isfinite(time)) {
-        return ERROR(inst, "fmi2SetTime: time is not finite (%g)", time);
+        return ERROR_FN(inst, "time is not finite (%g)", time);
     }
     inst->s.me_time = time;
     inst->s.me_time_set = 1;
@@ -194,16 +184,16 @@ fmi2Status instance_set_time(fmi2Component c, fmi2Real time)
 
 fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], size_t nx)
 {
-    Instance *inst = me_instance(c, IN(S_CONTINUOUS_TIME), "fmi2SetContinuousStates");
+    Instance *inst = me_instance(c);
     if (!inst) {
         return fmi2Error;
     }
-    if (bad_array(inst, x, nx, N_STATES, "fmi2SetContinuousStates", "states")) {
+    if (bad_array(inst, x, nx, N_STATES, "states")) {
         return fmi2Error;
     }
     for (size_t k = 0; k < nx; k++) { /* check all before changing anything */
         if (!isfinite(x[k])) {
-            return ERROR(inst, "fmi2SetContinuousStates: state %lu is not finite (%g)",
+            return ERROR_FN(inst, "state %lu is not finite (%g)",
                          (unsigned long)k + 1, x[k]);
         }
     }
@@ -214,12 +204,12 @@ fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], s
 
 fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t nx)
 {
-    Instance *inst = me_instance(c, EVALUATED, "fmi2GetContinuousStates");
+    Instance *inst = me_instance(c);
     fmi2Status status;
     if (!inst) {
         return fmi2Error;
     }
-    if (bad_array(inst, x, nx, N_STATES, "fmi2GetContinuousStates", "states")) {
+    if (bad_array(inst, x, nx, N_STATES, "states")) {
         return fmi2Error;
     }
     status = refresh(inst);
@@ -232,12 +222,11 @@ fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t 
 
 fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
-    Instance *inst = me_instance(c, IN(S_INSTANTIATED) | EVALUATED,
-                                 "fmi2GetNominalsOfContinuousStates");
+    Instance *inst = me_instance(c);
     if (!inst) {
         return fmi2Error;
     }
-    if (bad_array(inst, x_nominal, nx, N_STATES, "fmi2GetNominalsOfContinuousStates", "states")) {
+    if (bad_array(inst, x_nominal, nx, N_STATES, "states")) {
         return fmi2Error;
     }
     for (size_t k = 0; k < nx; k++) {
@@ -250,12 +239,12 @@ fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t n
 
 fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
-    Instance *inst = me_instance(c, EVALUATED, "fmi2GetDerivatives");
+    Instance *inst = me_instance(c);
     fmi2Status status;
     if (!inst) {
         return fmi2Error;
     }
-    if (bad_array(inst, derivatives, nx, N_STATES, "fmi2GetDerivatives", "derivatives")) {
+    if (bad_array(inst, derivatives, nx, N_STATES, "derivatives")) {
         return fmi2Error;
     }
     status = refresh(inst);
@@ -272,13 +261,12 @@ fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], siz
 
 fmi2Status instance_get_event_indicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
 {
-    Instance *inst = me_instance(c, EVALUATED, "fmi2GetEventIndicators");
+    Instance *inst = me_instance(c);
     fmi2Status status;
     if (!inst) {
         return fmi2Error;
     }
-    if (bad_array(inst, eventIndicators, ni, N_EVENT_INDICATORS, "fmi2GetEventIndicators",
-                  "event indicators")) {
+    if (bad_array(inst, eventIndicators, ni, N_EVENT_INDICATORS, "event indicators")) {
         return fmi2Error;
     }
     status = refresh(inst);

@@ -107,24 +107,24 @@ static int check_snapshot(const Snapshot *s, fmi2Type type, char *msg)
 
 /* A pointer from fmi2GetFMUstate / fmi2DeSerializeFMUstate of this FMU, not yet freed (as far
  * as can be told: the same limits as instance_ok). */
-static int state_ok(Instance *inst, const StateBox *box, const char *function)
+static int state_ok(Instance *inst, const StateBox *box)
 {
     if (box->magic != STATE_MAGIC || box->n_vars != N_VARS ||
         strncmp(box->identifier, MODEL_IDENTIFIER_STR, sizeof box->identifier) != 0) {
         log_message(inst, fmi2Error, "logStatusError",
                     "%s: the FMU state is not a live state of this %s FMU (freed, foreign or "
-                    "overwritten): refused", function, MODEL_IDENTIFIER_STR);
+                    "overwritten): refused", inst->fn, MODEL_IDENTIFIER_STR);
         return 0;
     }
     return 1;
 }
 
 /* *state itself when it is a live state, a new one when it is NULL, else NULL (logged). */
-static StateBox *state_for_writing(Instance *inst, fmi2FMUstate *state, const char *function)
+static StateBox *state_for_writing(Instance *inst, fmi2FMUstate *state)
 {
     StateBox *box = (StateBox *)*state;
     if (box) {
-        return state_ok(inst, box, function) ? box : NULL;
+        return state_ok(inst, box) ? box : NULL;
     }
     box = (StateBox *)calloc(1, sizeof(StateBox));
     if (!box) {
@@ -146,9 +146,9 @@ fmi2Status instance_get_state(fmi2Component c, fmi2FMUstate *state)
         return fmi2Error;
     }
     if (!state) {
-        return ERROR(inst, "fmi2GetFMUstate: the state pointer is NULL");
+        return ERROR_FN(inst, "the state pointer is NULL");
     }
-    box = state_for_writing(inst, state, "fmi2GetFMUstate");
+    box = state_for_writing(inst, state);
     if (!box) {
         return fmi2Error;
     }
@@ -164,13 +164,13 @@ fmi2Status instance_set_state(fmi2Component c, fmi2FMUstate state)
         return fmi2Error;
     }
     if (!box) {
-        return ERROR(inst, "fmi2SetFMUstate: the state is NULL");
+        return ERROR_FN(inst, "the state is NULL");
     }
-    if (!state_ok(inst, box, "fmi2SetFMUstate")) {
+    if (!state_ok(inst, box)) {
         return fmi2Error;
     }
     if (check_snapshot(&box->s, inst->type, inst->msg)) {
-        return ERROR(inst, "fmi2SetFMUstate: invalid FMU state (%s): refused", inst->msg);
+        return ERROR_FN(inst, "invalid FMU state (%s): refused", inst->msg);
     }
     inst->s = box->s;
     return fmi2OK;
@@ -187,7 +187,7 @@ fmi2Status instance_free_state(fmi2Component c, fmi2FMUstate *state)
         return fmi2OK; /* FMI 2.0: a NULL state is ignored */
     }
     box = (StateBox *)*state;
-    if (!state_ok(inst, box, "fmi2FreeFMUstate")) {
+    if (!state_ok(inst, box)) {
         return fmi2Error; /* freeing it could corrupt the host's heap */
     }
     *(volatile unsigned *)&box->magic = 0; /* volatile: see fmi2FreeInstance */
@@ -261,9 +261,9 @@ fmi2Status instance_serialized_size(fmi2Component c, fmi2FMUstate state, size_t 
         return fmi2Error;
     }
     if (!state || !size) {
-        return ERROR(inst, "fmi2SerializedFMUstateSize: NULL state or size");
+        return ERROR_FN(inst, "NULL state or size");
     }
-    if (!state_ok(inst, (const StateBox *)state, "fmi2SerializedFMUstateSize")) {
+    if (!state_ok(inst, (const StateBox *)state)) {
         return fmi2Error;
     }
     *size = sizeof(SerialHeader) + sizeof(Snapshot);
@@ -280,14 +280,14 @@ fmi2Status instance_serialize(fmi2Component c, fmi2FMUstate state, fmi2Byte seri
         return fmi2Error;
     }
     if (!state || !serializedState || size < sizeof header + sizeof(Snapshot)) {
-        return ERROR(inst, "fmi2SerializeFMUstate: NULL state or buffer smaller than %lu bytes",
+        return ERROR_FN(inst, "NULL state or buffer smaller than %lu bytes",
                      (unsigned long)(sizeof header + sizeof(Snapshot)));
     }
-    if (!state_ok(inst, box, "fmi2SerializeFMUstate")) {
+    if (!state_ok(inst, box)) {
         return fmi2Error;
     }
     if (check_finite(&box->s, inst->msg)) {
-        return ERROR(inst, "fmi2SerializeFMUstate: the state holds a number that is not finite "
+        return ERROR_FN(inst, "the state holds a number that is not finite "
                            "(%s): not serialized (it could not be restored)", inst->msg);
     }
     serial_header(&header);
@@ -344,16 +344,16 @@ fmi2Status instance_deserialize(fmi2Component c, const fmi2Byte serializedState[
         return fmi2Error;
     }
     if (!state) {
-        return ERROR(inst, "fmi2DeSerializeFMUstate: the state pointer is NULL");
+        return ERROR_FN(inst, "the state pointer is NULL");
     }
     if (!serializedState) {
-        return ERROR(inst, "fmi2DeSerializeFMUstate: serialized state refused: NULL bytes");
+        return ERROR_FN(inst, "serialized state refused: NULL bytes");
     }
     if (decode_state((const unsigned char *)serializedState, size, &body, inst->msg) ||
         check_snapshot(&body, inst->type, inst->msg)) {
-        return ERROR(inst, "fmi2DeSerializeFMUstate: serialized state refused: %s", inst->msg);
+        return ERROR_FN(inst, "serialized state refused: %s", inst->msg);
     }
-    box = state_for_writing(inst, state, "fmi2DeSerializeFMUstate");
+    box = state_for_writing(inst, state);
     if (!box) {
         return fmi2Error;
     }

@@ -17,12 +17,7 @@
 static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
                                const void *value, VarType type, int setting)
 {
-    static const char *type_names[] = {"Real", "Integer", "Boolean", "String"};
-    static const char *getters[] = {"fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean",
-                                    "fmi2GetString"};
-    static const char *setters[] = {"fmi2SetReal", "fmi2SetInteger", "fmi2SetBoolean",
-                                    "fmi2SetString"};
-    if (!instance_ok(inst, setting ? setters[type] : getters[type])) {
+    if (!instance_ok(inst, setting ? "a setter" : "a getter")) {
         return fmi2Error;
     }
     if (nvr > 0 && (!vr || !value)) {
@@ -34,7 +29,7 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
         }
         if (VARS[vr[k]].type != type) {
             return ERROR(inst, "variable %s is not of type %s", VARS[vr[k]].name,
-                         type_names[type]);
+                         inst->type_names[type]);
         }
         if (setting) {
             const VarInfo *v = &VARS[vr[k]];
@@ -53,13 +48,7 @@ static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], si
                 return ERROR(inst, "parameter %s is fixed: it cannot be set after initialization",
                              v->name);
             }
-            if (inst->s.phase == S_TERMINATED) {
-                return ERROR(inst, "variable %s cannot be set after fmi2Terminate", v->name);
-            }
         }
-    }
-    if (!setting && inst->s.phase == S_INSTANTIATED && nvr > 0) {
-        return ERROR(inst, "values can be read only from initialization mode on");
     }
     if (!setting && inst->s.dirty && inst->s.phase == S_INITIALIZATION && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);

@@ -30,14 +30,6 @@ static int known_index(unsigned int vr)
     return -1;
 }
 
-/* After initialization: step mode (co-simulation), event or continuous-time mode (ME). */
-static int ready(const Instance *inst)
-{
-    const Phase p = inst->s.phase;
-    return inst->type == fmi2CoSimulation ? p == S_STEP_COMPLETE
-                                          : p == S_EVENT_MODE || p == S_CONTINUOUS_TIME;
-}
-
 fmi2Status partials_directional(Instance *inst, const char *function,
                                 const unsigned int unknowns[], size_t n_unknowns,
                                 const unsigned int knowns[], size_t n_knowns, const double seed[],
@@ -48,11 +40,6 @@ fmi2Status partials_directional(Instance *inst, const char *function,
     const int cs = inst->type == fmi2CoSimulation;
     if (!instance_ok(inst, function)) {
         return fmi2Error;
-    }
-    if (!ready(inst)) {
-        return ERR(inst, "%s: only after initialization (%s); the initial unknowns' partial"
-                         " derivatives are not provided", function,
-                   cs ? "in step mode" : "in event or continuous-time mode");
     }
     if ((n_unknowns && (!unknowns || !sensitivity)) || (n_knowns && (!knowns || !seed))) {
         return ERR(inst, "%s: NULL array with a non-zero count", function);
@@ -104,9 +91,6 @@ fmi2Status partials_output_derivatives(Instance *inst, const char *function,
     }
     if (inst->type != fmi2CoSimulation) {
         return ERR(inst, "%s: output derivatives are a co-simulation function", function);
-    }
-    if (inst->s.phase != S_STEP_COMPLETE) {
-        return ERR(inst, "%s: only after initialization, between steps", function);
     }
     if (n && (!vrs || !orders || !values)) {
         return ERR(inst, "%s: NULL array with a non-zero count", function);

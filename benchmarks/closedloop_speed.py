@@ -16,6 +16,7 @@ import numpy as np
 
 from impedance_cosim.cosim.fmus.fmi3 import open_fmu
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 H, STOP = 1 / 400, 20.0
@@ -25,7 +26,9 @@ def master(fmus: Path) -> tuple[float, np.ndarray, list[str]]:
     """Wall time of the master's run (initialization included) and its rows."""
     with read_ssp(fmus / "PaperScenario-native.ssp") as system:
         start = time.perf_counter()
-        result = Master(system, parameter_set="observer", algorithm="gauss-seidel").run()
+        result = Master(
+            system, RunOptions(parameter_set="observer", algorithm="gauss-seidel")
+        ).run()
         wall = time.perf_counter() - start
     assert result.error is None, result.error
     return wall, result.data[:, 1:], result.names[1:]

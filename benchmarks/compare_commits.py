@@ -24,9 +24,14 @@ from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.ssp.read import read_ssp
 system = read_ssp(sys.argv[1])
 best = None
+try:
+    from impedance_cosim.cosim.master.options import RunOptions
+    options = {"options": RunOptions(stop_time=float(sys.argv[3]), loop="c")}
+except ImportError:  # the other side is a commit before RunOptions (issue 36)
+    options = {"stop_time": float(sys.argv[3]), "loop": "c"}
 for _ in range(int(sys.argv[2])):
     start = time.perf_counter()
-    result = Master(system, stop_time=float(sys.argv[3]), loop="c").run()
+    result = Master(system, **options).run()
     best = min(best or 1e9, time.perf_counter() - start)
     assert result.ok, result.error
 print(best, hashlib.sha256(result.data.tobytes()).hexdigest())

@@ -19,6 +19,7 @@ import numpy as np
 
 from impedance_cosim.cosim.engines import others
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import SCENARIOS
 
@@ -28,8 +29,10 @@ FMUS = Path(__file__).resolve().parent.parent / "fmus"
 
 def ours(archive: Path, stop: float, **conventions) -> dict[str, np.ndarray]:
     with read_ssp(archive) as system:
-        result = Master(system, algorithm="jacobi", stop_time=stop, divergence_limit=1e300,
-                        **conventions).run()  # fmt: skip
+        result = Master(
+            system,
+            RunOptions(algorithm="jacobi", stop_time=stop, divergence_limit=1e300, **conventions),
+        ).run()
     return {n: result[n] for n in others.CONNECTED}
 
 

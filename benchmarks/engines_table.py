@@ -38,6 +38,7 @@ from impedance_cosim.cosim.engines.container import (
     run_container,
 )
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import SCENARIOS
 
@@ -49,8 +50,10 @@ FMUS = Path(__file__).resolve().parent.parent / "fmus"
 
 def ours(archive: Path, algorithm: str, stop: float, **conventions) -> dict[str, np.ndarray]:
     with read_ssp(archive) as system:
-        result = Master(system, algorithm=algorithm, stop_time=stop, divergence_limit=1e300,
-                        **conventions).run()  # fmt: skip
+        result = Master(
+            system,
+            RunOptions(algorithm=algorithm, stop_time=stop, divergence_limit=1e300, **conventions),
+        ).run()
     return {n: result[n] for n in others.CONNECTED + LAW}
 
 

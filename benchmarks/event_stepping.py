@@ -21,6 +21,7 @@ import numpy as np
 
 from impedance_cosim.cosim.master.events import EventExactMaster
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 
@@ -50,9 +51,13 @@ def main() -> None:
           f"{'peak event N':>13} {'max |diff|':>10} {'wall fixed/event s':>19}")  # fmt: skip
     for scenario, algorithm in RUNS:
         t0 = time.perf_counter()
-        fixed = Master(system, scenario, algorithm=algorithm, stop_time=args.stop).run()
+        fixed = Master(
+            system, RunOptions(parameter_set=scenario, algorithm=algorithm, stop_time=args.stop)
+        ).run()
         t1 = time.perf_counter()
-        exact_master = EventExactMaster(system, scenario, algorithm=algorithm, stop_time=args.stop)
+        exact_master = EventExactMaster(
+            system, RunOptions(parameter_set=scenario, algorithm=algorithm, stop_time=args.stop)
+        )
         exact = exact_master.run()
         t2 = time.perf_counter()
         if not (fixed.ok and exact.ok):

@@ -20,14 +20,16 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from impedance_cosim.apps import linearize as lin
 from impedance_cosim.apps.stability.bisection import QUANTITIES, Bisection, Case
-from impedance_cosim.apps.sweep.plan import master_arguments
+from impedance_cosim.apps.sweep.plan import run_options
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 SSP = Path(__file__).resolve().parent.parent / "fmus" / "PaperScenario-native.ssp"
@@ -41,8 +43,15 @@ def accuracy() -> None:
     """Part 1: errors against the fine-step reference."""
     system = read_ssp(SSP)
     h = 1 / 400
-    ref = Master(system, "observer", {"controller.sample_period": h}, "gauss-seidel",
-                 h / FINE).run()  # fmt: skip
+    ref = Master(
+        system,
+        RunOptions(
+            parameter_set="observer",
+            overrides={"controller.sample_period": h},
+            algorithm="gauss-seidel",
+            step_size=h / FINE,
+        ),
+    ).run()
     assert ref.ok, ref.error
     grid = ref.data[::FINE]
     print("## accuracy: observer, 20 s, 400 Hz, against Gauss-Seidel at 1/4000 s")
@@ -50,7 +59,10 @@ def accuracy() -> None:
     print("|---|" + "---|---|" * len(SIGNALS))
     for algorithm, extrapolation in (("gauss-seidel", "none"), ("jacobi", "none"),
                                      ("jacobi", "linear")):  # fmt: skip
-        r = Master(system, "observer", algorithm=algorithm, extrapolation=extrapolation).run()
+        r = Master(
+            system,
+            RunOptions(parameter_set="observer", algorithm=algorithm, extrapolation=extrapolation),
+        ).run()
         if not r.ok:
             print(f"| {algorithm}, {extrapolation} | {r.error} |")
             continue
@@ -73,8 +85,10 @@ def critical_rate(system, velocity: str, extrapolation: str) -> Bisection:
     b = Bisection(case, *QUANTITIES["rate"][0])
     while points := b.next_points():
         for x in points:
-            args = master_arguments(case.point(x), {"stop": 20.0})
-            r = Master(system, **args, extrapolation=extrapolation).run()
+            options = replace(
+                run_options(case.point(x), {"stop": 20.0}), extrapolation=extrapolation
+            )
+            r = Master(system, options).run()
             b.record(x, r.ok, r.error or "")
     return b
 
@@ -128,8 +142,8 @@ def speed() -> None:
     for algorithm, extrapolation in (("gauss-seidel", "none"), ("jacobi", "none"),
                                      ("jacobi", "linear")):  # fmt: skip
         best = min(
-            Master(system, "observer", algorithm=algorithm, loop="c",
-                   extrapolation=extrapolation).run().info["stepping_s"]
+            Master(system, RunOptions(parameter_set="observer", algorithm=algorithm, loop="c",
+                                      extrapolation=extrapolation)).run().info["stepping_s"]
             for _ in range(5)
         )  # fmt: skip
         print(f"{algorithm}, extrapolation {extrapolation}: {best / 8000 * 1e6:.2f} us per step")

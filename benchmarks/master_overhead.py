@@ -47,6 +47,7 @@ import numpy as np
 from impedance_cosim.cosim.engines.others import run_in_libcosim
 from impedance_cosim.cosim.master import master as master_module
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 HERE = Path(__file__).resolve().parent
@@ -72,9 +73,9 @@ def alone_library() -> ctypes.CDLL:
 def fmus_alone(lib: ctypes.CDLL, system, algorithm: str) -> float:
     """Seconds per step of the FMUs' own compute (sum over the FMUs, each stepped alone on the
     inputs it got in our co-simulation with `algorithm`; see the module docstring)."""
-    recorded = Master(system, algorithm=algorithm).run()
+    recorded = Master(system, RunOptions(algorithm=algorithm)).run()
     assert recorded.ok and len(recorded.data) == LONG + 1, recorded.error
-    m = Master(system, algorithm=algorithm)
+    m = Master(system, RunOptions(algorithm=algorithm))
     ordered = [master_module._Slot(n, master_module.open_fmu(m.fmu_files[n], n)) for n in m.order]
     try:
         m._wire(ordered)
@@ -127,7 +128,9 @@ def per_step(fn: Callable[[int], object], repeat: int) -> float:
 
 def ours(system, algorithm: str, loop: str) -> Callable[[int], object]:
     def run(steps: int) -> None:
-        result = Master(system, algorithm=algorithm, loop=loop, stop_time=steps * H).run()
+        result = Master(
+            system, RunOptions(algorithm=algorithm, loop=loop, stop_time=steps * H)
+        ).run()
         assert result.ok and result.info["loop"] == loop, result.error
 
     return run
@@ -206,7 +209,7 @@ def container_equals_ours(path: Path, system) -> bool:
 
     theirs = simulate_fmu(str(path), stop_time=LONG * H, step_size=H, output_interval=H,
                           fmi_type="CoSimulation")  # fmt: skip
-    mine = Master(system, algorithm="jacobi").run()
+    mine = Master(system, RunOptions(algorithm="jacobi")).run()
     names = [n for n in theirs.dtype.names if n != "time"]
     return len(theirs) == len(mine.data) and all(
         np.array_equal(theirs[n], mine[n.replace("_", ".", 1)]) for n in names

@@ -20,6 +20,7 @@ import zipfile
 from pathlib import Path
 
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.plain_loop import run_models
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
@@ -66,7 +67,7 @@ def main() -> None:
     t_models = time.perf_counter() - start
 
     start = time.perf_counter()
-    result = Master(read_ssp(ssp), stop_time=args.stop).run()
+    result = Master(read_ssp(ssp), RunOptions(stop_time=args.stop)).run()
     t_ours = time.perf_counter() - start
     assert result.ok, result.error
 

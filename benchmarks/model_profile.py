@@ -71,11 +71,12 @@ def fmi_layer(stop: float) -> tuple[float, float]:
     import sys
 
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.ssp.read import read_ssp
     from impedance_cosim.packaging.build import DEFAULT_OUT
 
     system = read_ssp(DEFAULT_OUT / "PaperScenario.ssp")
-    Master(system, stop_time=0.01).run()  # loads the FMUs' modules
+    Master(system, RunOptions(stop_time=0.01)).run()  # loads the FMUs' modules
     inside = [0.0]
     slaves = [m.ModelSlave for n, m in list(sys.modules.items()) if n.endswith(".fmi.slave")]
     for cls in {c for c in slaves if c.__module__.startswith("impedance_cosim_")}:
@@ -84,7 +85,7 @@ def fmi_layer(stop: float) -> tuple[float, float]:
     best = (float("inf"), 0.0)
     for _ in range(5):
         inside[0] = 0.0
-        result = Master(system, stop_time=stop, loop="c").run()
+        result = Master(system, RunOptions(stop_time=stop, loop="c")).run()
         best = min(best, (result.info["stepping_s"], inside[0]))
     return best
 

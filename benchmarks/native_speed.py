@@ -10,6 +10,7 @@ import argparse
 import time
 
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
@@ -24,7 +25,7 @@ def best_of(ssp, repeat: int, loop: str) -> tuple[float, float]:
     best, best_steps = float("inf"), float("inf")
     for _ in range(repeat):
         start = time.perf_counter()
-        result = Master(system, loop=loop).run()
+        result = Master(system, RunOptions(loop=loop)).run()
         best = min(best, time.perf_counter() - start)
         best_steps = min(best_steps, result.info["stepping_s"])
         assert result.ok, result.error

@@ -18,6 +18,7 @@ import numpy as np
 
 from impedance_cosim.cosim.engines.others import EngineError, run_in_libcosim
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
 from impedance_cosim.packaging.build_all import build_all
@@ -52,7 +53,8 @@ def main() -> None:
     for algorithm in ("jacobi", "gauss-seidel"):
         start = time.perf_counter()
         ours = Master(
-            read_ssp(ssp), parameter_set=args.set, algorithm=algorithm, stop_time=args.stop
+            read_ssp(ssp),
+            RunOptions(parameter_set=args.set, algorithm=algorithm, stop_time=args.stop),
         ).run()
         wall = time.perf_counter() - start
         rows = len(ours.data)  # a run that diverged keeps its rows up to there

@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.realtime import RealtimeOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
@@ -43,7 +44,7 @@ def measure(system, stop: float, runs: int, options) -> dict:
     misses, p99, jmax, late = [], [], [], []
     notes: list[str] = []
     for _ in range(runs):
-        result = Master(system, stop_time=stop, realtime=options).run()
+        result = Master(system, RunOptions(stop_time=stop, realtime=options)).run()
         assert result.ok, result.error
         stats = result.info["realtime"]
         misses.append(stats["deadline_misses"])

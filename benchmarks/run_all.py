@@ -26,6 +26,7 @@ from master_speed import time_fmpy
 from impedance_cosim.apps import sweep
 from impedance_cosim.apps.sweep import execute as sweep_batch
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.plain_loop import run_models
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.packaging.build import DEFAULT_OUT
@@ -63,7 +64,7 @@ def master_table(stop: float, repeat: int, fmpy: bool) -> None:
         stepping = []
 
         def run(system=system, loop=loop, stepping=stepping) -> None:
-            result = Master(system, stop_time=stop, loop=loop).run()
+            result = Master(system, RunOptions(stop_time=stop, loop=loop)).run()
             assert result.ok, result.error
             stepping.append(result.info["stepping_s"])
 

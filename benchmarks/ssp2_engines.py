@@ -38,10 +38,13 @@ H = 0.0025
 
 def _ours(archive: Path, stop: float, algorithm: str) -> dict[str, np.ndarray]:
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.ssp.read import read_ssp
 
     with read_ssp(archive) as system:
-        run = Master(system, "observer", algorithm=algorithm, stop_time=stop).run()
+        run = Master(
+            system, RunOptions(parameter_set="observer", algorithm=algorithm, stop_time=stop)
+        ).run()
     if run.error:
         raise RuntimeError(run.error)
     return {name: run[name] for name in SIGNALS}

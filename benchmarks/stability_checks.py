@@ -19,6 +19,7 @@ import numpy as np
 
 from impedance_cosim.apps import linearize as lin
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 SSP = Path(__file__).resolve().parent.parent / "fmus" / "PaperScenario-native.ssp"
@@ -30,8 +31,15 @@ def scan() -> None:
         for rate in rates:
             cells = []
             for stop in (10.0, 20.0):
-                r = Master(system, parameter_set=source, step_size=1 / rate, stop_time=stop,
-                           overrides={"controller.sample_period": 1 / rate}).run()  # fmt: skip
+                r = Master(
+                    system,
+                    RunOptions(
+                        parameter_set=source,
+                        step_size=1 / rate,
+                        stop_time=stop,
+                        overrides={"controller.sample_period": 1 / rate},
+                    ),
+                ).run()
                 cells.append("bounded" if r.ok else f"diverges at {r.data[-1, 0]:.2f} s")
             print(f"{source:10} {rate} Hz: 10 s {cells[0]:22} 20 s {cells[1]}")
 

@@ -39,6 +39,7 @@ from impedance_cosim.apps import analysis
 from impedance_cosim.apps.options import DEFAULT_SSP
 from impedance_cosim.cosim.fmus.output import echo_fmu_output
 from impedance_cosim.cosim.master.master import Master, MasterError, RunResult
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results import provenance
 from impedance_cosim.cosim.results.result import Divergence, run_status
 from impedance_cosim.cosim.ssp.read import SspError, SystemDescription, read_ssp
@@ -324,8 +325,7 @@ def _master(system: SystemDescription, scenario: str | None, options: dict[str, 
     if scenario is not None and not isinstance(scenario, str):
         raise ValueError(f"scenario must be a name like 'observer' (got {scenario!r})")
     try:
-        return Master(
-            system,
+        run = RunOptions(
             parameter_set=scenario,
             overrides=options["overrides"],
             algorithm=options["algorithm"],
@@ -333,6 +333,7 @@ def _master(system: SystemDescription, scenario: str | None, options: dict[str, 
             stop_time=options["stop_time"],
             fmu_files=options["fmu_files"] or None,
         )
+        return Master(system, run)
     except MasterError as exc:  # the same class (NoStepError is also a ValueError)
         raise type(exc)(str(exc)) from None
 

@@ -23,6 +23,7 @@ from impedance_cosim.cosim.archive import DEFAULT_LIMITS, ArchiveError, unpack
 from impedance_cosim.cosim.fmus.files import FmuArchiveError, FmuError
 from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
 from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import SspError, read_ssp
 
 PLANT = "PumaPlant.fmu"
@@ -126,7 +127,7 @@ def test_an_honest_bomb_is_refused_from_its_header_wherever_the_fmu_comes_from(
     with pytest.raises(FmuArchiveError, match=f"^bomb.fmu: {re.escape(expected)}$"):
         FmuInstance(bomb, "plant")
     with read_ssp(native_ssp) as system, pytest.raises(MasterError, match=re.escape(expected)):
-        Master(system, stop_time=0.05, fmu_files={"plant": bomb})
+        Master(system, RunOptions(stop_time=0.05, fmu_files={"plant": bomb}))
     ssp = with_members(native_ssp, tmp_path / "bomb.ssp", {}, drop=(f"resources/{PLANT}",))
     with zipfile.ZipFile(ssp, "a") as z:
         z.write(bomb, f"resources/{PLANT}")

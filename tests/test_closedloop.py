@@ -22,6 +22,7 @@ from controller_model.model import ControllerModel
 from impedance_cosim.cosim.fmus.fmi2 import FmuError
 from impedance_cosim.cosim.fmus.fmi3 import open_fmu
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import SCENARIOS
 from impedance_cosim.packaging.build_all import build_all
@@ -54,8 +55,15 @@ def path_of(folder: Path, fmi: int, scenario: str) -> Path:
 
 def master_run(native_ssp: Path, scenario: str, stop: float, overrides=None):
     with read_ssp(native_ssp) as system:
-        result = Master(system, parameter_set=scenario, algorithm="gauss-seidel",
-                        stop_time=stop, overrides=overrides).run()  # fmt: skip
+        result = Master(
+            system,
+            RunOptions(
+                parameter_set=scenario,
+                algorithm="gauss-seidel",
+                stop_time=stop,
+                overrides=overrides,
+            ),
+        ).run()
     assert result.error is None, result.error
     return result
 

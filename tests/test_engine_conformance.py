@@ -12,12 +12,12 @@ scenario's parameter set on each component), run with the native FMUs. The engin
   first step gets zero torque; each row is stamped with its step's start time.
 
 Each engine is compared with our master's Jacobi run twice: on the engine's conventions (time grid,
-start values: Master(step_times=..., zero_start_inputs=...)) every connected signal agrees within
-1e-9 (measured: bit-identical); on our own conventions (t_0 + i h) libcosim and ecospy agree within
-1e-9 in the stable scenario (observer), and the difference and measured scenarios (unstable under
-Jacobi) diverge at the same step in all of them (Fig. 4 outside our master). fmpy cannot agree
-with our default run: its zero start torque moves the whole run (measured: 3e-5 rad on q1 after
-the first step).
+start values: RunOptions(step_times=..., zero_start_inputs=...)) every connected signal agrees
+within 1e-9 (measured: bit-identical); on our own conventions (t_0 + i h) libcosim and ecospy agree
+within 1e-9 in the stable scenario (observer), and the difference and measured scenarios
+(unstable under Jacobi) diverge at the same step in all of them (Fig. 4 outside our master). fmpy
+cannot agree with our default run: its zero start torque moves the whole run (measured: 3e-5 rad
+on q1 after the first step).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from impedance_cosim.cosim.engines.others import (
     run_in_libcosim,
 )
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import SCENARIOS
 from impedance_cosim.packaging.build import build_ssp
@@ -69,8 +70,16 @@ def archives(native_dir, tmp_path_factory):
 def ours(archive, stop: float, **conventions) -> dict[str, np.ndarray]:
     with read_ssp(archive) as system:
         (scenario,) = system.parameter_sets  # one set per scenario archive
-        result = Master(system, scenario, algorithm="jacobi", stop_time=stop,
-                        divergence_limit=1e300, **conventions).run()  # fmt: skip
+        result = Master(
+            system,
+            RunOptions(
+                parameter_set=scenario,
+                algorithm="jacobi",
+                stop_time=stop,
+                divergence_limit=1e300,
+                **conventions,
+            ),
+        ).run()
     return {name: result[name] for name in ["time", *CONNECTED]}
 
 
@@ -156,7 +165,9 @@ def test_libcosim_runs_the_default_variant_of_the_multi_scenario_archive(fmu_dir
     theirs = in_libcosim(archive, 0.25)
     with read_ssp(archive) as system:
         assert list(system.parameter_sets) == list(SCENARIOS)
-        result = Master(system, "observer", algorithm="jacobi", stop_time=0.25).run()
+        result = Master(
+            system, RunOptions(parameter_set="observer", algorithm="jacobi", stop_time=0.25)
+        ).run()
     assert max(np.max(np.abs(result[n] - theirs[n])) for n in CONNECTED) <= 1e-9
 
 

@@ -14,6 +14,7 @@ import pytest
 
 from impedance_cosim.cosim.master.events import EventExactMaster, EventInstance
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
@@ -37,8 +38,8 @@ def test_event_exact_run_stops_at_each_switch_and_keeps_the_sampled_rows(
 
     monkeypatch.setattr(EventInstance, "_event_iteration", counting)
     system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
-    fixed = Master(system, "observer", algorithm=algorithm).run()
-    master = EventExactMaster(system, "observer", algorithm=algorithm)
+    fixed = Master(system, RunOptions(parameter_set="observer", algorithm=algorithm)).run()
+    master = EventExactMaster(system, RunOptions(parameter_set="observer", algorithm=algorithm))
     exact = master.run()
     assert fixed.ok and exact.ok, (fixed.error, exact.error)
     assert exact.info["loop"] == "python" and set(master.events) == {"plant"}

@@ -15,6 +15,7 @@ import pytest
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.fmus.fmi2 import FmuInstance
 from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
@@ -65,12 +66,14 @@ def _spied_run(monkeypatch, native_ssp, extrapolation: str, scenario: str = "obs
     monkeypatch.setattr(FmuInstance, "exit_initialization", spy_exit)
     master = Master(
         system,
-        parameter_set=scenario,
-        algorithm="jacobi",
-        step_size=H,
-        stop_time=STEPS * H,
-        extrapolation=extrapolation,
-        loop="python",
+        RunOptions(
+            parameter_set=scenario,
+            algorithm="jacobi",
+            step_size=H,
+            stop_time=STEPS * H,
+            extrapolation=extrapolation,
+            loop="python",
+        ),
     )  # fmt: skip  (the C loop sets its inputs in C)
     result = master.run()
     assert result.ok, result.error
@@ -117,17 +120,27 @@ def test_none_sets_the_outputs_unchanged(monkeypatch, native_ssp):
 def test_refusals_name_the_problem(ssp_path, native_ssp):
     native, python = read_ssp(native_ssp), read_ssp(ssp_path)
     with pytest.raises(MasterError, match="needs the Jacobi algorithm"):
-        Master(native, algorithm="gauss-seidel", extrapolation="linear")
+        Master(native, RunOptions(algorithm="gauss-seidel", extrapolation="linear"))
     with pytest.raises(MasterError, match=r"PumaPlant.fmu: 0\).*maxOutputDerivativeOrder|"
                        r"maxOutputDerivativeOrder >= 1: .*PumaPlant.fmu: 0"):  # fmt: skip
-        Master(python, algorithm="jacobi", extrapolation="linear")
+        Master(python, RunOptions(algorithm="jacobi", extrapolation="linear"))
     with pytest.raises(MasterError, match="not zero_start_inputs"):
-        Master(native, algorithm="jacobi", extrapolation="linear", zero_start_inputs=True)
+        Master(
+            native, RunOptions(algorithm="jacobi", extrapolation="linear", zero_start_inputs=True)
+        )
     with pytest.raises(MasterError, match="extrapolation must be one of"):
-        Master(native, algorithm="jacobi", extrapolation="quadratic")
+        Master(native, RunOptions(algorithm="jacobi", extrapolation="quadratic"))
     for loop in ("c", "python"):
-        quantized = Master(native, algorithm="jacobi", stop_time=0.01, extrapolation="linear",
-                           overrides={"plant.q_quant": 1e-4}, loop=loop).run()  # fmt: skip
+        quantized = Master(
+            native,
+            RunOptions(
+                algorithm="jacobi",
+                stop_time=0.01,
+                extrapolation="linear",
+                overrides={"plant.q_quant": 1e-4},
+                loop=loop,
+            ),
+        ).run()
         assert quantized.status == "failed" and len(quantized.data) == 1  # row t_0 kept
         assert "fmi2GetRealOutputDerivatives failed" in quantized.error
         assert "q1 has no time derivative" in quantized.error
@@ -181,12 +194,23 @@ def test_fmi3_plant_extrapolates_like_fmi2(native_ssp, fmi3_dir):
     rows = []
     for ssp in (native_ssp, fmi3_dir.parent / "PaperScenario-fmi3.ssp"):
         for loop in ("c", "python"):
-            r = Master(read_ssp(ssp), "observer", algorithm="jacobi", stop_time=0.25,
-                       extrapolation="linear", loop=loop).run()  # fmt: skip
+            r = Master(
+                read_ssp(ssp),
+                RunOptions(
+                    parameter_set="observer",
+                    algorithm="jacobi",
+                    stop_time=0.25,
+                    extrapolation="linear",
+                    loop=loop,
+                ),
+            ).run()
             assert r.ok, r.error
             assert r.info["loop"] == loop
             rows.append({n: r.data[:, k] for k, n in enumerate(r.names)})
-    plain = Master(read_ssp(native_ssp), "observer", algorithm="jacobi", stop_time=0.25).run()
+    plain = Master(
+        read_ssp(native_ssp),
+        RunOptions(parameter_set="observer", algorithm="jacobi", stop_time=0.25),
+    ).run()
     for name in ("plant.q1", "plant.q3", "controller.tau1", "controller.tau3"):
         for other in rows[1:]:
             np.testing.assert_array_equal(rows[0][name], other[name], err_msg=name)
@@ -206,8 +230,17 @@ def test_the_linearised_loop_steps_like_the_master(native_ssp, extrapolation, sc
     from plant_model.model import PlantModel
 
     h, n = 1 / 800, 800  # 800 Hz: the true velocity extrapolated is stable from 663 Hz
-    master = Master(read_ssp(native_ssp), scenario, {"controller.sample_period": h}, "jacobi",
-                    h, n * h, extrapolation=extrapolation)  # fmt: skip
+    master = Master(
+        read_ssp(native_ssp),
+        RunOptions(
+            parameter_set=scenario,
+            overrides={"controller.sample_period": h},
+            algorithm="jacobi",
+            step_size=h,
+            stop_time=n * h,
+            extrapolation=extrapolation,
+        ),
+    )
     result = master.run()
     assert result.ok, result.error
     plant = PlantModel(dict(master.parameters["plant"]), 0.0, None)

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from fmpy.fmi3 import FMU3ScheduledExecution, FMU3Slave
 from fmpy.validation import validate_fmu
 
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results.result import read_csv
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import CONNECTIONS
@@ -127,8 +129,12 @@ def fmi2_and_fmi3_runs(fmu_dir, native_dir, fmi3_dir):
     for tag in ("native", "fmi3"):
         system = read_ssp(fmu_dir / f"PaperScenario-{tag}.ssp")
         for scenario in SCENARIOS:
-            runs[tag, scenario, "gauss-seidel"] = Master(system, parameter_set=scenario).run()
-        runs[tag, "observer", "jacobi"] = Master(system, "observer", algorithm="jacobi").run()
+            runs[tag, scenario, "gauss-seidel"] = Master(
+                system, RunOptions(parameter_set=scenario)
+            ).run()
+        runs[tag, "observer", "jacobi"] = Master(
+            system, RunOptions(parameter_set="observer", algorithm="jacobi")
+        ).run()
     return runs
 
 
@@ -168,11 +174,9 @@ def test_c_loop_steps_fmi3_as_the_python_loop_bit_for_bit(fmu_dir, fmi3_dir, alg
         ({}, {"plant.max_rhs_evaluations": 25}, None),  # refused at the first contact
     ]
     for files, overrides, stop in cases:
-        runs = {
-            loop: Master(system, "observer", overrides, algorithm, stop_time=stop,
-                         fmu_files=files, loop=loop).run()
-            for loop in ("c", "python")
-        }  # fmt: skip
+        options = RunOptions(parameter_set="observer", overrides=overrides, algorithm=algorithm,
+                             stop_time=stop, fmu_files=files)  # fmt: skip
+        runs = {loop: Master(system, replace(options, loop=loop)).run() for loop in ("c", "python")}
         assert runs["c"].info["loop"] == "c"
         assert np.array_equal(runs["c"].data, runs["python"].data)
         assert runs["c"].ok == runs["python"].ok == (not overrides)
@@ -184,10 +188,10 @@ def test_c_loop_is_refused_for_a_clocked_fmu(fmu_dir, fmi3_dir):
     the default picks the Python loop."""
     system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
     files = {"controller": fmi3_dir / CLOCKED}
-    run = Master(system, stop_time=0.1, loop="c", fmu_files=files).run()
+    run = Master(system, RunOptions(stop_time=0.1, loop="c", fmu_files=files)).run()
     assert not run.ok
     assert "controller is an FMI 3.0 Scheduled Execution FMU (clocks)" in run.error
-    assert Master(system, stop_time=0.1, fmu_files=files).run().info["loop"] == "python"
+    assert Master(system, RunOptions(stop_time=0.1, fmu_files=files)).run().info["loop"] == "python"
 
 
 # --- other hosts ---------------------------------------------------------------------------
@@ -255,7 +259,7 @@ def test_clocked_controller_ticks_8000_times_with_the_fmi2_torques(
     partition and hands the torques to the FMI 3.0 plant for one interval. Over 20 s that is
     8000 ticks, and the torques (and the plant) equal the FMI 2.0 Gauss-Seidel run's."""
     system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
-    params = Master(system, "observer").parameters
+    params = Master(system, RunOptions(parameter_set="observer")).parameters
     plant, pvr, plog = _instance(FMU3Slave, fmi3_dir / PLANT, "plant")
     ctrl, cvr, clog = _instance(FMU3ScheduledExecution, fmi3_dir / CLOCKED, "controller")
     for fmu, name, path in ((plant, "plant", PLANT), (ctrl, "controller", CLOCKED)):
@@ -387,12 +391,17 @@ def test_our_master_honours_the_clock(
     monkeypatch.setattr(fmu3.ClockedInstance, "step", counting)
     system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
     files = {"controller": fmi3_dir / CLOCKED}
-    run = Master(system, "observer", algorithm=algorithm, fmu_files=files).run()
+    run = Master(
+        system, RunOptions(parameter_set="observer", algorithm=algorithm, fmu_files=files)
+    ).run()
     assert run.ok, run.error
     assert ticks[-1] == 8000 and len(ticks) == 8000
     assert np.array_equal(run.data, fmi2_and_fmi3_runs["native", "observer", algorithm].data)
     ticks.clear()
-    coarse = Master(system, "observer", step_size=1 / 200, stop_time=1.0, fmu_files=files).run()
+    coarse = Master(
+        system,
+        RunOptions(parameter_set="observer", step_size=1 / 200, stop_time=1.0, fmu_files=files),
+    ).run()
     assert coarse.ok and ticks[-1] == 400 and len(ticks) == 200
 
 

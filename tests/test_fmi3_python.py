@@ -12,6 +12,7 @@ from fmpy.validation import validate_fmu
 from impedance_cosim.cosim.fmus.fmi2 import FmuError
 from impedance_cosim.cosim.fmus.fmi3 import FmuInstance3
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytest.importorskip("pythonfmu3")
@@ -45,9 +46,14 @@ def test_python_fmi3_fmu_is_valid_with_the_native_variables(python3_dir, fmi3_di
 
 @pytest.mark.slow
 def test_master_runs_python_fmi3_equal_to_python_fmi2(fmu_dir, python3_dir):
-    fmi2 = Master(read_ssp(fmu_dir / "PaperScenario.ssp"), "observer").run()
+    fmi2 = Master(
+        read_ssp(fmu_dir / "PaperScenario.ssp"), RunOptions(parameter_set="observer")
+    ).run()
     files = {"plant": python3_dir / NAMES[0], "controller": python3_dir / NAMES[1]}
-    fmi3 = Master(read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"), "observer", fmu_files=files).run()
+    fmi3 = Master(
+        read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"),
+        RunOptions(parameter_set="observer", fmu_files=files),
+    ).run()
     assert fmi2.ok and fmi3.ok, (fmi2.error, fmi3.error)
     assert fmi3.names == fmi2.names and np.array_equal(fmi3.data, fmi2.data)
     assert fmi3.data.shape[0] == 8001 and fmi3["plant.contact_force"].max() > 1.0

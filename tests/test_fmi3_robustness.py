@@ -17,6 +17,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging.build_fmi3 import CLOCKED_NAME
@@ -214,7 +215,9 @@ def test_c_host_runs_fmi3_closed_loop_as_our_master(fmu_dir, fmi3_dir, tmp_path)
     subprocess.run([str(_host(tmp_path)), *_host_args(fmi3_dir, steps, out)], check=True,
                    timeout=120)  # fmt: skip
     rows = np.loadtxt(out, delimiter=",")
-    run = Master(read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"), stop_time=steps * DT).run()
+    run = Master(
+        read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"), RunOptions(stop_time=steps * DT)
+    ).run()
     assert run.ok, run.error
     names = ["time", "plant.x", "plant.y", "plant.contact_force",
              *(f"controller.tau{i}" for i in (1, 2, 3))]  # fmt: skip

@@ -174,12 +174,13 @@ def test_process_survives_an_initialization_error(ssp_path):
     script = f"""
 import gc
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 system = read_ssp(r"{ssp_path}")
 for k in range(3):
-    bad = Master(system, overrides={{"plant.x0": 5.0}}, stop_time=0.1).run()
+    bad = Master(system, RunOptions(overrides={{"plant.x0": 5.0}}, stop_time=0.1)).run()
     assert "unreachable" in bad.error, bad.error
-    assert Master(system, stop_time=0.1).run().ok
+    assert Master(system, RunOptions(stop_time=0.1)).run().ok
     gc.collect()
 print("survived")
 from impedance_cosim.cosim.fmus.fmi2 import exit_process

@@ -22,6 +22,7 @@ from impedance_cosim.apps.robot import Fault
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master import realtime
 from impedance_cosim.cosim.master.master import RT_COLUMNS, Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results import result as results
 from impedance_cosim.cosim.ssp.read import read_ssp
 
@@ -46,7 +47,9 @@ PATIENT = {"plant.timeout_s": 20.0, "plant.init_timeout_s": 60.0}
 def bridged(system, bridge, port, stop, **kw):
     overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN, **PATIENT,
                  **kw.pop("overrides", {})}  # fmt: skip
-    master = Master(system, stop_time=stop, fmu_files={"plant": bridge}, overrides=overrides, **kw)
+    master = Master(
+        system, RunOptions(stop_time=stop, fmu_files={"plant": bridge}, overrides=overrides, **kw)
+    )
     return master.run()
 
 
@@ -272,11 +275,12 @@ def test_a_robot_that_never_starts_fails_the_initialization(ssp_path, bridge):
     code = (
         "import sys, time\n"
         "from impedance_cosim.cosim.master.master import Master\n"
+        "from impedance_cosim.cosim.master.options import RunOptions\n"
         "from impedance_cosim.cosim.ssp.read import read_ssp\n"
         "start = time.perf_counter()\n"
-        f"r = Master(read_ssp({str(ssp_path)!r}), stop_time=1.0, fmu_files={{'plant': "
+        f"r = Master(read_ssp({str(ssp_path)!r}), RunOptions(stop_time=1.0, fmu_files={{'plant': "
         f"{str(bridge)!r}}}, overrides={{'plant.robot_port': {port}, "
-        f"'plant.robot_token': {TOKEN!r}, 'plant.init_timeout_s': 0.3}}).run()\n"
+        f"'plant.robot_token': {TOKEN!r}, 'plant.init_timeout_s': 0.3}})).run()\n"
         "print(r.ok, len(r.data), round(time.perf_counter() - start, 2), r.error, flush=True)\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -317,6 +321,6 @@ def test_bridge_against_a_realtime_robot(system, bridge, robot):
     assert result.ok, result.error
     robot_t = result["plant.robot_t"]
     assert np.all(np.diff(robot_t) >= 0) and 0.9 < robot_t[-1] < 1.1  # the robot's own clock
-    ref = Master(system, stop_time=1.0).run()
+    ref = Master(system, RunOptions(stop_time=1.0)).run()
     # held torque applied on arrival, 1 ms ticks: close to the in-process plant, not equal
     assert np.abs(result["plant.x"] - ref["plant.x"]).max() < 5e-3

@@ -14,6 +14,7 @@ from bridge_model import protocol
 from impedance_cosim.apps.robot_plant import plant_class
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results import result as results
 from impedance_cosim.cosim.ssp.read import read_ssp
 
@@ -39,20 +40,24 @@ def robot(robot):
 def bridged(system, fmu_dir, port, stop, **kw):
     overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN, **PATIENT}
     fmu = {"plant": fmu_dir / "BridgePlant.fmu"}
-    return Master(system, stop_time=stop, fmu_files=fmu, overrides=overrides, **kw).run()
+    return Master(
+        system, RunOptions(stop_time=stop, fmu_files=fmu, overrides=overrides, **kw)
+    ).run()
 
 
 @pytest.mark.slow
 def test_lockstep_bridge_equals_the_mujoco_fmu(system, fmu_dir, robot):
     """Through the first impact (4.5 s): every column of the bridged run equals the run with
     MujocoPlant.fmu in process, bit for bit (the same model, MJCF and calls)."""
-    ref = Master(system, stop_time=4.5, fmu_files={"plant": fmu_dir / "MujocoPlant.fmu"}).run()
+    ref = Master(
+        system, RunOptions(stop_time=4.5, fmu_files={"plant": fmu_dir / "MujocoPlant.fmu"})
+    ).run()
     got = bridged(system, fmu_dir, robot(), 4.5)
     assert ref.ok and got.ok, (ref.error, got.error)
     assert ref["plant.contact_force"].max() > 50.0  # the impact is in it
     for name in ref.names:
         assert np.array_equal(got[name], ref[name]), name
-    ours = Master(system, stop_time=4.5).run()  # and it is MuJoCo's, not our plant
+    ours = Master(system, RunOptions(stop_time=4.5)).run()  # and it is MuJoCo's, not our plant
     assert not np.array_equal(got["plant.contact_force"], ours["plant.contact_force"])
 
 

@@ -77,12 +77,13 @@ import sys
 import numpy as np
 import plant_model.model  # the host has our plant imported, like the CLI and sweep workers
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 system = read_ssp(sys.argv[1])
-original = Master(system, stop_time=0.5).run()
-swapped = Master(system, stop_time=0.5, fmu_files={"plant": sys.argv[2]}).run()
-again = Master(system, stop_time=0.5).run()
+original = Master(system, RunOptions(stop_time=0.5)).run()
+swapped = Master(system, RunOptions(stop_time=0.5, fmu_files={"plant": sys.argv[2]})).run()
+again = Master(system, RunOptions(stop_time=0.5)).run()
 assert original.ok and swapped.ok and again.ok
 pen = original.names.index("plant.penetration")
 diff = swapped.data - original.data

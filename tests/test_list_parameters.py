@@ -11,6 +11,7 @@ import pytest
 from impedance_cosim.apps.parameters import parameter_lines
 from impedance_cosim.cosim.fmus.files import model_description
 from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 
@@ -43,7 +44,9 @@ def test_every_listed_name_is_accepted_by_set_with_its_value(system):
             value = rows[f"{name.split('.')[0]}.{member}"][3]
         else:
             value = cells[3]
-        Master(system, parameter_set="observer", overrides={name: value}, stop_time=0.0025)
+        Master(
+            system, RunOptions(parameter_set="observer", overrides={name: value}, stop_time=0.0025)
+        )
 
 
 def test_an_unknown_scenario_is_refused(system):

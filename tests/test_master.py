@@ -15,6 +15,7 @@ import pytest
 
 from controller_model.model import ControllerModel
 from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.plain_loop import run_models
 from impedance_cosim.cosim.ssp.read import SspError, read_ssp
 from impedance_cosim.cosim.system.paper import source_files
@@ -58,7 +59,7 @@ def test_gauss_seidel_equals_the_plain_model_loop(paper_run):
 
 
 def test_jacobi_is_the_same_loop_with_one_step_of_delay(ssp_path):
-    jacobi = Master(read_ssp(ssp_path), algorithm="jacobi", stop_time=2.0).run()
+    jacobi = Master(read_ssp(ssp_path), RunOptions(algorithm="jacobi", stop_time=2.0)).run()
     ref = run_models(stop_time=2.0, algorithm="jacobi")
     for name, values in ref.items():
         assert np.allclose(jacobi[name], values, rtol=0, atol=1e-9), name
@@ -86,10 +87,10 @@ def test_initial_values_are_exchanged(paper_run):
 def test_parameter_sets_are_applied(ssp_path):
     """The 'measured' set feeds the true velocity; the 'difference' set the backward difference."""
     system = read_ssp(ssp_path)
-    measured = Master(system, parameter_set="measured", stop_time=0.5).run()
+    measured = Master(system, RunOptions(parameter_set="measured", stop_time=0.5)).run()
     for i in (1, 2, 3):  # the sample taken at t_i is recorded at t_i+1
         assert np.array_equal(measured[f"controller.qd_hat{i}"][2:], measured[f"plant.qd{i}"][1:-1])
-    diff = Master(system, parameter_set="difference", stop_time=0.5).run()
+    diff = Master(system, RunOptions(parameter_set="difference", stop_time=0.5)).run()
     assert np.array_equal(diff["controller.qd_hat1"][2:], diff["controller.qd_diff1"][2:])
 
 
@@ -102,21 +103,25 @@ def test_parameter_bindings_change_the_run(ssp_path, tmp_path):
         return (text[:start] + text[start:].replace('value="50.0"', 'value="5.0"', 1)).encode()
 
     edited = modified(ssp_path, tmp_path, {"resources/observer_controller.ssv": lower_gain})
-    base = Master(read_ssp(ssp_path), stop_time=0.5).run()
-    changed = Master(read_ssp(edited), stop_time=0.5).run()
+    base = Master(read_ssp(ssp_path), RunOptions(stop_time=0.5)).run()
+    changed = Master(read_ssp(edited), RunOptions(stop_time=0.5)).run()
     assert np.abs(changed["controller.qd_obs1"] - base["controller.qd_obs1"]).max() > 1e-4
     assert np.array_equal(changed["controller.qd_obs2"][:1], base["controller.qd_obs2"][:1])
 
 
 def test_overrides_and_vector_shorthand(ssp_path):
-    master = Master(read_ssp(ssp_path), overrides={"controller.K": "80", "plant.q_noise": 1e-5})
+    master = Master(
+        read_ssp(ssp_path), RunOptions(overrides={"controller.K": "80", "plant.q_noise": 1e-5})
+    )
     assert [master.parameters["controller"][f"K{i}"] for i in (1, 2, 3)] == [80.0] * 3
     assert master.parameters["plant"]["q_noise"] == 1e-5
 
 
 @pytest.mark.slow
 def test_diverging_run_stops_with_a_clear_message_and_partial_results(ssp_path):
-    result = Master(read_ssp(ssp_path), overrides={"controller.G": 1e9}, stop_time=5.0).run()
+    result = Master(
+        read_ssp(ssp_path), RunOptions(overrides={"controller.G": 1e9}, stop_time=5.0)
+    ).run()
     assert not result.ok
     assert "diverged" in result.error or "failed" in result.error
     assert 2 < len(result["time"]) < 2001
@@ -185,17 +190,17 @@ def test_unit_mismatch_is_refused(ssp_path, tmp_path):
 )
 def test_bad_overrides_are_refused(ssp_path, overrides, message):
     with pytest.raises(MasterError, match=message):
-        Master(read_ssp(ssp_path), overrides=overrides)
+        Master(read_ssp(ssp_path), RunOptions(overrides=overrides))
 
 
 def test_bad_run_settings_are_refused(ssp_path):
     system = read_ssp(ssp_path)
     with pytest.raises(MasterError, match="no parameter set 'fast'"):
-        Master(system, parameter_set="fast")
+        Master(system, RunOptions(parameter_set="fast"))
     with pytest.raises(MasterError, match="algorithm must be one of"):
-        Master(system, algorithm="newton")
+        Master(system, RunOptions(algorithm="newton"))
     with pytest.raises(MasterError, match="not a whole number"):
-        Master(system, stop_time=1.0001)
+        Master(system, RunOptions(stop_time=1.0001))
 
 
 # --- the paper's story, on the master's run ------------------------------------------------------
@@ -230,8 +235,8 @@ def test_paper_scenario_tracking_and_observer(paper_run):
 def test_sampling_is_independent_of_the_master_step(ssp_path):
     """Stepped at 1/4000 s, the controller produces the same torque samples as at 1/400 s."""
     system = read_ssp(ssp_path)
-    coarse = Master(system, stop_time=1.0).run()
-    fine = Master(system, stop_time=1.0, step_size=DT / 10).run()
+    coarse = Master(system, RunOptions(stop_time=1.0)).run()
+    fine = Master(system, RunOptions(stop_time=1.0, step_size=DT / 10)).run()
     for i in (1, 2, 3):
         ref = coarse[f"controller.tau{i}"][1:]  # sample k, recorded at (k + 1) * DT
         got = fine[f"controller.tau{i}"][1::10]  # ... and at k * DT + DT / 10
@@ -245,11 +250,12 @@ def test_compiled_loop_equals_the_python_loop(ssp_path, algorithm):
     when a run diverges)."""
     system = read_ssp(ssp_path)
     runs = [
-        Master(system, algorithm=algorithm, stop_time=2.0, loop=k).run() for k in ("c", "python")
+        Master(system, RunOptions(algorithm=algorithm, stop_time=2.0, loop=k)).run()
+        for k in ("c", "python")
     ]
     assert runs[0].ok and np.array_equal(runs[0].data, runs[1].data)
     bad = [
-        Master(system, overrides={"controller.G": 1e9}, stop_time=1.0, loop=k).run()
+        Master(system, RunOptions(overrides={"controller.G": 1e9}, stop_time=1.0, loop=k)).run()
         for k in ("c", "python")
     ]
     assert not bad[0].ok and np.array_equal(bad[0].data, bad[1].data)
@@ -274,7 +280,7 @@ def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
     monkeypatch.setattr(master.StepProgress, "EVERY", 0.0)
     system = read_ssp(ssp_path)
     log = io.StringIO()
-    result = Master(system, stop_time=2.0, loop=loop).run(progress=log)
+    result = Master(system, RunOptions(stop_time=2.0, loop=loop)).run(progress=log)
     assert result.ok, result.error
     lines = log.getvalue().splitlines()
     assert "\r" not in log.getvalue() and len(lines) >= 2
@@ -283,11 +289,11 @@ def test_progress_names_the_parameter_set_with_time_and_real_time_factor(
     assert "100%" in lines[-1] and "800/800" in lines[-1] and "t=2.00 s" in lines[-1]
     assert re.search(r"[0-9.]+x real time", lines[-1]), lines[-1]
     terminal = _Terminal()
-    Master(system, stop_time=2.0, loop=loop).run(progress=terminal)
+    Master(system, RunOptions(stop_time=2.0, loop=loop)).run(progress=terminal)
     assert "\r" in terminal.getvalue() and "800/800" in terminal.getvalue()
     quiet = io.StringIO()
     monkeypatch.setattr(master.StepProgress, "DELAY", 60.0)
-    Master(system, stop_time=2.0, loop=loop).run(progress=quiet)
+    Master(system, RunOptions(stop_time=2.0, loop=loop)).run(progress=quiet)
     assert quiet.getvalue() == ""  # a run shorter than the delay shows nothing
 
 

@@ -19,6 +19,7 @@ from fmu_steps import output_names, rows_after
 
 from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results.result import read_csv
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.cosim.system.paper import CONNECTIONS
@@ -81,8 +82,8 @@ def test_native_equals_python_over_the_paper_scenario(both_runs):
 
 def test_swapping_flavours_is_a_change_of_file(ssp_path, native_dir):
     system = read_ssp(ssp_path)
-    mixed = Master(system, fmu_files={"plant": native_dir / PLANT}, stop_time=1.0).run()
-    pure = Master(system, stop_time=1.0).run()
+    mixed = Master(system, RunOptions(fmu_files={"plant": native_dir / PLANT}, stop_time=1.0)).run()
+    pure = Master(system, RunOptions(stop_time=1.0)).run()
     assert mixed.ok and np.allclose(mixed.data, pure.data, rtol=1e-12, atol=1e-12)
 
 

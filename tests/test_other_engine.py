@@ -17,6 +17,7 @@ from test_master import modified  # an archive with members edited
 
 from impedance_cosim.cosim.engines.others import EngineError, nanosecond_times, run_in_libcosim
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytest.importorskip("libcosimpy")
@@ -39,10 +40,12 @@ def master_run(
     """Our master; libcosim_grid: every step on libcosim's time grid (t and h from integer ns)."""
     result = Master(
         read_ssp(ssp_path),
-        parameter_set=parameter_set,
-        algorithm=algorithm,
-        stop_time=stop,
-        step_times=nanosecond_times(0.0, H) if libcosim_grid else None,
+        RunOptions(
+            parameter_set=parameter_set,
+            algorithm=algorithm,
+            stop_time=stop,
+            step_times=nanosecond_times(0.0, H) if libcosim_grid else None,
+        ),
     ).run()
     assert result.ok, result.error
     return result

@@ -11,6 +11,7 @@ import pytest
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master import realtime
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.realtime import RealtimeOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
@@ -67,7 +68,7 @@ def test_a_realtime_run_reports_its_options(native_dir):
     system = read_ssp(native_dir.parent / "PaperScenario-native.ssp")
     cpu = min(os.sched_getaffinity(0))
     options = RealtimeOptions(cpu=cpu, spin_s=0.0)
-    result = Master(system, stop_time=0.05, realtime=options).run()
+    result = Master(system, RunOptions(stop_time=0.05, realtime=options)).run()
     assert result.ok and len(result.data) == 21
     assert result.info["realtime"]["notes"] == [f"pinned to CPU {cpu}"]
     assert result.info["realtime"]["steps"] == 20

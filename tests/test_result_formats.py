@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results.result import format_rows
 from impedance_cosim.cosim.ssp.read import read_ssp
 
@@ -46,7 +47,7 @@ def test_every_scenario_run_is_spelled_as_repr(native_ssp, algorithm: str) -> No
     system = read_ssp(native_ssp)
     try:
         for scenario in system.parameter_sets:
-            result = Master(system, parameter_set=scenario, algorithm=algorithm).run()
+            result = Master(system, RunOptions(parameter_set=scenario, algorithm=algorithm)).run()
             assert len(result.data) > 100, (scenario, result.error)
             assert format_rows(result.data) == repr_rows(result.data), scenario
     finally:
@@ -75,7 +76,7 @@ def test_each_model_description_is_parsed_once_per_run(native_ssp, monkeypatch) 
     fmu_files._description.cache_clear()
     system = read_ssp(native_ssp)
     try:
-        result = Master(system, stop_time=0.1).run()
+        result = Master(system, RunOptions(stop_time=0.1)).run()
     finally:
         system.close()
     assert result.ok, result.error

@@ -26,6 +26,7 @@ from bridge_model.model import BridgeModel
 from impedance_cosim.apps.robot import RobotServer
 from impedance_cosim.apps.robot_process import ROBOT_COMMAND, start_robot
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from impedance_cosim.fmi.model import ModelError
 from plant_model.model import PlantModel
@@ -180,8 +181,14 @@ def test_the_bridge_fmu_refuses_a_fifo_token_file(system, fmu_dir, odd_files):
     result = {}
 
     def run() -> None:
-        master = Master(system, stop_time=0.1, fmu_files={"plant": fmu_dir / "BridgePlant.fmu"},
-                        overrides={"plant.robot_token_file": str(fifo)})  # fmt: skip
+        master = Master(
+            system,
+            RunOptions(
+                stop_time=0.1,
+                fmu_files={"plant": fmu_dir / "BridgePlant.fmu"},
+                overrides={"plant.robot_token_file": str(fifo)},
+            ),
+        )
         result["r"] = master.run()
 
     runner = threading.Thread(target=run, daemon=True)
@@ -319,13 +326,17 @@ def test_a_foreign_flood_at_full_speed_leaves_the_run_bit_identical(system, fmu_
     procs.append(flooder)
     wait_for_line(flooder.stdout, "flooding")
     overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN, **PATIENT}
-    got = Master(system, stop_time=2.0, fmu_files={"plant": fmu_dir / "BridgePlant.fmu"},
-                 overrides=overrides).run()  # fmt: skip
+    got = Master(
+        system,
+        RunOptions(
+            stop_time=2.0, fmu_files={"plant": fmu_dir / "BridgePlant.fmu"}, overrides=overrides
+        ),
+    ).run()
     assert flooder.poll() is None  # the flood went on until the last step
     flooder.stdin.close()
     sent = int(wait_for_line(flooder.stdout, ""))
     assert got.ok, got.error
-    ref = Master(system, stop_time=2.0).run()
+    ref = Master(system, RunOptions(stop_time=2.0)).run()
     for name in ref.names:
         assert np.array_equal(got[name], ref[name]), name
     assert robot.poll() is None  # still serving

@@ -362,12 +362,15 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
     import numpy as np
 
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.ssp.read import read_ssp
     from impedance_cosim.util.interrupt import RunInterrupted
 
     system = read_ssp(native_ssp)
     blocks: list = []
-    done = Master(system, stop_time=2.0, loop=loop).run(sink=lambda n, b: blocks.append(b.copy()))
+    done = Master(system, RunOptions(stop_time=2.0, loop=loop)).run(
+        sink=lambda n, b: blocks.append(b.copy())
+    )
     assert len(blocks[0]) == 0 and np.array_equal(np.vstack(blocks), done.data)
 
     blocks.clear()
@@ -381,7 +384,7 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
     sent: list = []
     before = signal.getsignal(signal.SIGINT)  # SIG_IGN when the tests run in a background job
     with pytest.raises(RunInterrupted) as caught:
-        Master(system, stop_time=400.0, loop=loop).run(sink=sink)
+        Master(system, RunOptions(stop_time=400.0, loop=loop)).run(sink=sink)
     kept = caught.value.result.data
     assert np.array_equal(np.vstack(blocks), kept) and 1000 < len(kept) < 2000
     assert np.array_equal(kept[:801], done.data)
@@ -405,7 +408,8 @@ def test_sink_gets_every_row_and_a_signal_stops_the_run(native_ssp, loop):
 def test_master_refuses_bad_times(native_ssp, kwargs, message):
     """The API too: a zero step is refused, not replaced by the default."""
     from impedance_cosim.cosim.master.master import Master, MasterError
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.ssp.read import read_ssp
 
     with pytest.raises(MasterError, match=re.escape(message)):
-        Master(read_ssp(native_ssp), **kwargs)
+        Master(read_ssp(native_ssp), RunOptions(**kwargs))

@@ -22,6 +22,7 @@ from bridge_model import protocol
 from impedance_cosim.apps.robot import RobotServer
 from impedance_cosim.apps.robot_process import ROBOT_COMMAND, start_robot, stop_robot
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 from plant_model.model import PlantModel
 
@@ -72,7 +73,9 @@ PATIENT = {"plant.timeout_s": 20.0, "plant.init_timeout_s": 60.0}
 
 def bridged(system, bridge, port, stop, **kw):
     overrides = {"plant.robot_port": port, "plant.robot_token": TOKEN, **PATIENT}
-    master = Master(system, stop_time=stop, fmu_files={"plant": bridge}, overrides=overrides, **kw)
+    master = Master(
+        system, RunOptions(stop_time=stop, fmu_files={"plant": bridge}, overrides=overrides, **kw)
+    )
     return master.run()
 
 
@@ -86,7 +89,7 @@ def test_foreign_datagrams_mid_run_are_ignored(system, fmu_dir, robot):
     for a session it made up: the run equals the in-process run bit for bit, and the robot's log
     reports the drops in at most one line a second."""
     port = robot()
-    ref = Master(system, stop_time=2.0).run()
+    ref = Master(system, RunOptions(stop_time=2.0)).run()
     stop = threading.Event()
     sent = [0]
 
@@ -312,12 +315,18 @@ def test_a_robot_with_a_token_file_serves_a_bridge_given_the_file(system, fmu_di
     try:
         overrides = {"plant.robot_port": port, "plant.robot_token_file": str(token_file),
                      **PATIENT}  # fmt: skip
-        result = Master(system, stop_time=0.5, fmu_files={"plant": fmu_dir / "BridgePlant.fmu"},
-                        overrides=overrides).run()  # fmt: skip
+        result = Master(
+            system,
+            RunOptions(
+                stop_time=0.5, fmu_files={"plant": fmu_dir / "BridgePlant.fmu"}, overrides=overrides
+            ),
+        ).run()
     finally:
         stop_robot(proc)
     assert result.ok, result.error
-    assert np.array_equal(result["plant.q1"], Master(system, stop_time=0.5).run()["plant.q1"])
+    assert np.array_equal(
+        result["plant.q1"], Master(system, RunOptions(stop_time=0.5)).run()["plant.q1"]
+    )
 
 
 def test_a_port_in_use_gets_one_line():
@@ -364,10 +373,11 @@ def test_a_bridge_with_another_token_fails_initialization(ssp_path, fmu_dir, rob
     port = robot()
     code = (
         "from impedance_cosim.cosim.master.master import Master\n"
+        "from impedance_cosim.cosim.master.options import RunOptions\n"
         "from impedance_cosim.cosim.ssp.read import read_ssp\n"
-        f"r = Master(read_ssp({str(ssp_path)!r}), stop_time=1.0, fmu_files={{'plant': "
+        f"r = Master(read_ssp({str(ssp_path)!r}), RunOptions(stop_time=1.0, fmu_files={{'plant': "
         f"{str(fmu_dir / 'BridgePlant.fmu')!r}}}, overrides={{'plant.robot_port': {port}, "
-        f"'plant.robot_token': {protocol.new_token()!r}, 'plant.init_timeout_s': 0.3}}).run()\n"
+        f"'plant.robot_token': {protocol.new_token()!r}, 'plant.init_timeout_s': 0.3}})).run()\n"
         "print(r.ok, len(r.data), r.error, flush=True)\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

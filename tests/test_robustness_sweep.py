@@ -664,8 +664,8 @@ def test_the_test_session_leaves_without_the_fmu_destructors(tmp_path, outcome):
 
 def test_set_may_give_what_the_grid_does_not_sweep(native_ssp):
     """controller.K1 swept, controller.K2 fixed: different parameters, both applied."""
-    from impedance_cosim.apps.sweep.plan import master_arguments, plan_sweep
+    from impedance_cosim.apps.sweep.plan import plan_sweep, run_options
 
     plan = plan_sweep(["controller.K1=10,20"], ssp=native_ssp, fixed=["controller.K2=7"])
-    overrides = master_arguments(plan.points[1], plan.options)["overrides"]
+    overrides = run_options(plan.points[1], plan.options).overrides
     assert overrides == {"controller.K1": 20, "controller.K2": 7}

@@ -17,6 +17,7 @@ import xmlschema
 
 from impedance_cosim.cosim.fmus import fmi3 as fmu3
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results.result import write_csv
 from impedance_cosim.cosim.ssp.read import SspError, read_ssp
 from impedance_cosim.cosim.ssp.ssp2 import SRMD, schema_dir
@@ -109,7 +110,7 @@ def test_both_editions_have_the_same_parameter_sets(editions):
 
 def _csv(path: Path, scenario: str, tmp: Path, **kw) -> bytes:
     with read_ssp(path) as system:
-        run = Master(system, scenario, **kw).run()
+        run = Master(system, RunOptions(parameter_set=scenario, **kw)).run()
     assert run.error is None or run.divergence is not None, run.error
     out = tmp / f"{path.stem}-{scenario}.csv"
     write_csv(out, run.names, run.data)
@@ -239,7 +240,7 @@ def test_an_implementation_the_master_cannot_honour_is_refused(editions, tmp_pat
     for name in [SSD, *(ssd_name(s) for s in SCENARIOS if ssd_name(s) != SSD)]:
         ssp = _broken(ssp, tmp_path / f"{len(name)}-{name}.ssp", old, new, name)
     with read_ssp(ssp) as system, pytest.raises(MasterError, match=message):
-        Master(system, stop_time=0.1)
+        Master(system, RunOptions(stop_time=0.1))
 
 
 @pytest.mark.parametrize("schema", ["with schema", "without schema"])
@@ -278,7 +279,7 @@ def test_a_clock_connector_of_another_interval_variability_than_the_fmus_is_refu
                 data = data.replace(fixed, tunable)
             z.writestr(info.filename, data)
     with read_ssp(out) as system, pytest.raises(MasterError) as err:
-        Master(system, stop_time=0.1)
+        Master(system, RunOptions(stop_time=0.1))
     assert "controller.sample_clock: intervalVariability fixed in the FMU, tunable in the SSD" in (
         str(err.value)
     )

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp import ssp1 as ssd
 from impedance_cosim.cosim.ssp.read import Limits, SspError, SystemDescription, read_ssp
 
@@ -407,7 +408,7 @@ def test_a_bad_parameter_value_names_the_archive_and_the_ssv(archive, tmp_path, 
     edits = {"resources/observer_plant.ssv": ssd_edit(old, new)}
     bad = repack(archive, tmp_path / "values.ssp", edits)
     with read_ssp(bad) as system, pytest.raises(MasterError) as err:
-        Master(system, parameter_set="observer")
+        Master(system, RunOptions(parameter_set="observer"))
     assert str(err.value) == f"{bad}: resources/observer_plant.ssv: {message}" + (
         " (a 64-bit float is at most 1.798e+308 in magnitude)" if "1e400" in message else ""
     )

@@ -164,6 +164,7 @@ def test_linear_prediction_brackets_the_simulated_boundary(reference, native_ssp
     """Sample-and-hold, true velocity: the linearised contact point predicts the critical rate,
     and the native co-simulation diverges 4 % below it and stays bounded 4 % above it."""
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.ssp.read import read_ssp
 
     pred = linearize.critical_rate(
@@ -173,8 +174,15 @@ def test_linear_prediction_brackets_the_simulated_boundary(reference, native_ssp
     system = read_ssp(native_ssp)
     outcome = {}
     for rate in (round(0.96 * pred), round(1.04 * pred)):
-        r = Master(system, parameter_set="measured", step_size=1 / rate, stop_time=20.0,
-                   overrides={"controller.sample_period": 1 / rate}).run()  # fmt: skip
+        r = Master(
+            system,
+            RunOptions(
+                parameter_set="measured",
+                step_size=1 / rate,
+                stop_time=20.0,
+                overrides={"controller.sample_period": 1 / rate},
+            ),
+        ).run()
         outcome[rate] = r.ok
     assert list(outcome.values()) == [False, True], outcome
 

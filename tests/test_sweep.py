@@ -11,6 +11,7 @@ import pytest
 from impedance_cosim.apps import sweep
 from impedance_cosim.cli import main
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 
@@ -57,10 +58,12 @@ def test_dask_sweep_equals_single_runs(native_ssp, tmp_path, capsys):
     for row in rows:
         result = Master(
             system,
-            parameter_set=row["system.scenario"],
-            algorithm=row["system.algorithm"],
-            stop_time=4.5,
-            overrides={"plant.q_noise": 1e-4},
+            RunOptions(
+                parameter_set=row["system.scenario"],
+                algorithm=row["system.algorithm"],
+                stop_time=4.5,
+                overrides={"plant.q_noise": 1e-4},
+            ),
         ).run()
         if result.ok:
             expected = sweep.run_metrics(result)
@@ -112,7 +115,7 @@ def test_progress_is_plain_lines_off_a_terminal_and_off_with_no_progress(
 
 def test_pseudo_parameters_map_to_the_master():
     options = {"plant_friction": [27.4, 4.54, 5.0], "stop": 2.0}
-    args = sweep.master_arguments(
+    run = sweep.run_options(
         {
             "system.rate": 200,
             "system.friction_scale": 2,
@@ -123,10 +126,10 @@ def test_pseudo_parameters_map_to_the_master():
         },
         options,
     )
-    assert args["step_size"] == 0.005 and args["overrides"]["controller.sample_period"] == 0.005
-    assert args["overrides"]["plant.f2"] == 9.08 and args["overrides"]["controller.K"] == 10
-    assert args["overrides"]["plant.q_quant"] == pytest.approx(2 * 3.141592653589793 / 4096)
-    assert args["algorithm"] == "jacobi" and args["parameter_set"] == "difference"
+    assert run.step_size == 0.005 and run.overrides["controller.sample_period"] == 0.005
+    assert run.overrides["plant.f2"] == 9.08 and run.overrides["controller.K"] == 10
+    assert run.overrides["plant.q_quant"] == pytest.approx(2 * 3.141592653589793 / 4096)
+    assert run.algorithm == "jacobi" and run.parameter_set == "difference"
 
 
 def test_grid_syntax():

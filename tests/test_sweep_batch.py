@@ -12,6 +12,7 @@ from impedance_cosim.apps import sweep
 from impedance_cosim.apps.sweep import execute as sweep_batch
 from impedance_cosim.cosim.fmus.pool import InstancePool
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 RUNS = [  # one after another on the same instances: each must equal a run on new instances
@@ -29,8 +30,8 @@ def test_reused_instances_give_identical_results(flavour, ssp_path, native_dir):
     system = read_ssp(ssp)
     pool = InstancePool()
     for kwargs in RUNS:
-        fresh = Master(system, stop_time=1.5, **kwargs).run()
-        reused = Master(system, stop_time=1.5, instances=pool, **kwargs).run()
+        fresh = Master(system, RunOptions(stop_time=1.5, **kwargs)).run()
+        reused = Master(system, RunOptions(stop_time=1.5, **kwargs), instances=pool).run()
         assert reused.names == fresh.names and reused.error == fresh.error
         assert reused.data.shape == fresh.data.shape and len(fresh.data) > 100
         assert np.array_equal(reused.data, fresh.data)  # bit for bit

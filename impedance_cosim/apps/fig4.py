@@ -99,10 +99,12 @@ def run_condition(
     signals the figure needs (time, true and fed-back x-velocity). reference: the x-velocity of
     a stable run (the oscillation is the deviation from it)."""
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
 
     overrides = {**condition.overrides, "controller.sample_period": 1.0 / rate}
-    r = Master(system, parameter_set=source, algorithm=condition.algorithm, overrides=overrides,
-               step_size=1.0 / rate, stop_time=stop).run()  # fmt: skip
+    options = RunOptions(parameter_set=source, algorithm=condition.algorithm, overrides=overrides,
+                         step_size=1.0 / rate, stop_time=stop)  # fmt: skip
+    r = Master(system, options).run()
     t, xd, xd_hat = r["time"], r["plant.xd"], r["controller.xd_hat"]
     finite = np.isfinite(xd) & (np.abs(xd) < 1e3)
     t, xd, xd_hat = t[finite], xd[finite], xd_hat[finite]

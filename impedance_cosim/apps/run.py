@@ -67,11 +67,11 @@ def _master(
     """The master of one run of the command (MasterError for anything it refuses)."""
     from impedance_cosim.cosim.master.events import EventExactMaster
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.master.realtime import realtime_setting
 
     cls = EventExactMaster if getattr(args, "event_exact", False) else Master
-    return cls(
-        system,
+    options = RunOptions(
         parameter_set=scenario,
         overrides=overrides,
         algorithm=algorithm,
@@ -82,6 +82,7 @@ def _master(
         overrides_origin="given with --set",
         extrapolation=getattr(args, "extrapolation", "none"),
     )
+    return cls(system, options)
 
 
 def _run_scenarios(args: argparse.Namespace, ssp: Path, overrides: dict, out: Path) -> int:

@@ -24,7 +24,7 @@ from impedance_cosim.apps.sweep.execute import (
     finished_tasks,
     task_result,
 )
-from impedance_cosim.apps.sweep.plan import master_arguments
+from impedance_cosim.apps.sweep.plan import run_options
 from impedance_cosim.apps.sweep.worker import RunInterruptedError, run_point
 
 SOURCES = ("observer", "difference", "measured")
@@ -237,7 +237,7 @@ def check_cases(todo: list[Case], ssp: Path, options: dict[str, Any]) -> None:
     system = read_ssp(ssp)
     for case in todo:
         for x in QUANTITIES[case.quantity][0]:
-            Master(system, **master_arguments(case.point(x), options))
+            Master(system, run_options(case.point(x), options))
 
 
 def run_study(

@@ -34,9 +34,9 @@ from impedance_cosim.apps.sweep.plan import (
     Plan,
     SweepError,
     known_parameters,
-    master_arguments,
     parse_axis,
     plan_sweep,
+    run_options,
 )
 from impedance_cosim.apps.sweep.study import STUDY, run_study
 from impedance_cosim.apps.sweep.table import SweepTable, TableError, open_table, read_table
@@ -60,7 +60,7 @@ __all__ = [
     "check_scheduler",
     "dask_client",
     "known_parameters",
-    "master_arguments",
+    "run_options",
     "open_table",
     "parse_axis",
     "plan_sweep",

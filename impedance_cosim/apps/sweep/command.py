@@ -34,7 +34,7 @@ from impedance_cosim.apps.sweep.plan import (
 from impedance_cosim.apps.sweep.study import STUDY, run_study
 from impedance_cosim.apps.sweep.table import open_table
 from impedance_cosim.apps.sweep.worker import STOP, RunInterruptedError
-from impedance_cosim.cosim.master.master import ALGORITHMS
+from impedance_cosim.cosim.master.setup import ALGORITHMS
 from impedance_cosim.cosim.results import provenance
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from impedance_cosim.apps.sweep.metrics import METRICS
-from impedance_cosim.apps.sweep.plan import Plan, archive_payload, master_arguments
+from impedance_cosim.apps.sweep.plan import Plan, archive_payload, run_options
 from impedance_cosim.apps.sweep.worker import RunInterruptedError, run_batch, run_point
 from impedance_cosim.cosim.fmus.pool import InstancePool
 from impedance_cosim.util.progress import Progress
@@ -85,8 +85,8 @@ def run_serial(
 
 def steps(point: dict, options: dict) -> float:
     """The master steps of a run (relative, for sizing batches: stop / step, 1 where unset)."""
-    args = master_arguments(point, options)
-    return (args["stop_time"] or 1.0) / (args["step_size"] or 1.0)
+    run = run_options(point, options)
+    return (run.stop_time or 1.0) / (run.step_size or 1.0)
 
 
 class Batcher:

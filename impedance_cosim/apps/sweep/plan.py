@@ -29,7 +29,9 @@ import numpy as np
 
 from impedance_cosim.apps.options import FMUS_DIR, PACKAGED_FMUS, REPO  # noqa: F401 (sweep's)
 from impedance_cosim.apps.sweep.points import grid_points, random_points
-from impedance_cosim.cosim.master.master import ALGORITHMS, Master, MasterError
+from impedance_cosim.cosim.master.master import Master, MasterError
+from impedance_cosim.cosim.master.options import RunOptions
+from impedance_cosim.cosim.master.setup import ALGORITHMS
 
 DEFAULT_SSP = FMUS_DIR / "PaperScenario-native.ssp"
 
@@ -205,8 +207,8 @@ def _check_axis_values(name: str, values: Sequence[Any], system) -> None:
             raise SweepError(f"system.encoder_bits must be an integer 0..52 (got {v!r})")
 
 
-def master_arguments(point: Mapping[str, Any], options: Mapping[str, Any]) -> dict[str, Any]:
-    """Master(...) keyword arguments for one run: the options, then the point's parameters."""
+def run_options(point: Mapping[str, Any], options: Mapping[str, Any]) -> RunOptions:
+    """The master's options for one run: the sweep's options, then the point's parameters."""
     overrides: dict[str, Any] = {}
     args = {
         "parameter_set": options.get("scenario"),
@@ -230,8 +232,7 @@ def master_arguments(point: Mapping[str, Any], options: Mapping[str, Any]) -> di
             overrides["plant.q_quant"] = 0.0 if value == 0 else 2 * math.pi / 2**value
         else:
             overrides[name] = value
-    args["overrides"] = overrides
-    return args
+    return RunOptions(**args, overrides=overrides)
 
 
 # the parameters a system.* name sets besides itself (a run sets them from its value)
@@ -259,7 +260,7 @@ def _check_fixed(system, options: Mapping[str, Any], axes: Mapping[str, Any], kn
     if not fixed:
         return
     try:  # the SSD's stop time and step: only what --set gives is checked here
-        Master(system, **master_arguments({}, {**options, "stop": None, "step": None}))
+        Master(system, run_options({}, {**options, "stop": None, "step": None}))
     except (MasterError, ValueError) as exc:
         raise SweepError(f"--set: {exc}") from None
     for name in fixed:
@@ -302,7 +303,7 @@ def plan_sweep(
         raise SweepError(f"--random needs 1..{MAX_RUNS} runs (got {random_runs})")
     else:
         points, mode = random_points(axes, random_runs, seed), "random"
-    nominal = Master(system, parameter_set=scenario)  # checks the scenario name
+    nominal = Master(system, RunOptions(parameter_set=scenario))  # checks the scenario name
     plant_md = {v.name: v for v in nominal.descriptions["plant"].modelVariables}
     friction = [
         float(nominal.parameters["plant"].get(f"f{i}", plant_md[f"f{i}"].start)) for i in (1, 2, 3)
@@ -320,7 +321,7 @@ def plan_sweep(
     for i, point in enumerate(points):
         where = ", ".join(f"{k}={v}" for k, v in point.items())
         try:
-            Master(system, **master_arguments(point, options))  # also refuses absurd run sizes
+            Master(system, run_options(point, options))  # also refuses absurd run sizes
         except (MasterError, ValueError) as exc:
             raise SweepError(f"run {i + 1} of {len(points)} ({where}): {exc}") from None
     return Plan(ssp=ssp, axes=axes, points=points, options=options, mode=mode, fixed=fixed_values)

@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import Any
 
 from impedance_cosim.apps.sweep.metrics import METRICS, run_metrics
-from impedance_cosim.apps.sweep.plan import master_arguments
+from impedance_cosim.apps.sweep.plan import run_options
 from impedance_cosim.cosim.fmus.pool import InstancePool
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 
 POOL = InstancePool()  # per worker process: FMU instances reused across runs (run_batch)
 _SYSTEMS: dict[str, Any] = {}  # per process: SSP digest -> SystemDescription (FMUs extracted once)
@@ -47,7 +48,7 @@ def prepare_worker(system: Any) -> None:
     """Take a few steps of the system (loads the FMUs' libraries and the compiled master loop),
     so that the first run in a process costs what the others do (batch sizes are measured)."""
     h = system.step_size or 1 / 400
-    Master(system, step_size=h, stop_time=system.start_time + 10 * h).run()
+    Master(system, RunOptions(step_size=h, stop_time=system.start_time + 10 * h)).run()
 
 
 class RunInterruptedError(Exception):
@@ -77,7 +78,7 @@ def run_point(
     try:
         system = _system(payload, digest)
         started = time.perf_counter()  # the first run in a process: after reading the archive
-        result = Master(system, **master_arguments(point, options), instances=instances).run()
+        result = Master(system, run_options(point, options), instances).run()
         if STOP["signal"] or _interrupted(result.error):
             raise RunInterruptedError(result.error or f"interrupted ({STOP['signal']})")
         row["t_end_s"] = float(result.data[-1, 0]) if len(result.data) else None

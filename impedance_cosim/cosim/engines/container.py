@@ -17,8 +17,8 @@ our archives, read from its documentation and measured on runs here:
   controller was initialized at q = 0, the stretched arm: it refused before issue 22, and now
   starts with gravity compensation only, a different run.)
 - parallel (default): every FMU steps from t_i on the outputs at t_i, i.e. Jacobi, equal to
-  `Master(..., algorithm="jacobi")`; sequential (`-sequential`): Gauss-Seidel in listing order,
-  equal to `Master(..., algorithm="gauss-seidel")` with the order the SSD lists (plant, then
+  `RunOptions(algorithm="jacobi")`; sequential (`-sequential`): Gauss-Seidel in listing order,
+  equal to `RunOptions(algorithm="gauss-seidel")` with the order the SSD lists (plant, then
   controller; our default order is the annotation's, controller first: the paper's
   sample-and-hold). Measured: bit-identical in both modes over the 20 s observer scenario (same
   time grid t_0 + i h: fmpy's CS loop does not accumulate time); `master_like_container` makes
@@ -150,11 +150,13 @@ def master_like_container(
     SSD's listing order (sequential). Returns the RunResult (divergence limit off: compare as
     far as both run)."""
     from impedance_cosim.cosim.master.master import Master
+    from impedance_cosim.cosim.master.options import RunOptions
     from impedance_cosim.cosim.ssp.read import read_ssp
 
     with read_ssp(ssp_path) as system:
         if sequential:
             system.order = [c.name for c in system.components]
         algorithm = "gauss-seidel" if sequential else "jacobi"
-        return Master(system, parameter_set, algorithm=algorithm, stop_time=stop_time,
-                      divergence_limit=1e300).run()  # fmt: skip
+        options = RunOptions(parameter_set=parameter_set, algorithm=algorithm, stop_time=stop_time,
+                             divergence_limit=1e300)  # fmt: skip
+        return Master(system, options).run()

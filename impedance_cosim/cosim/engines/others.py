@@ -25,7 +25,7 @@ fmus/PaperScenario.ssp, read from libcosim's sources and checked on runs here:
   end of the previous step (called from libcosim's worker threads), then all outputs are copied
   to the inputs.
   The plant therefore gets the controller's torque one step late (the torque from the sample at
-  t_{i-1}), unlike our Gauss-Seidel default: compare with `Master(..., algorithm="jacobi")`.
+  t_{i-1}), unlike our Gauss-Seidel default: compare with `RunOptions(algorithm="jacobi")`.
 - Recording (time-series observer): step 0 holds the outputs after initialization, step i + 1 the
   outputs after the step ending at t_{i+1}: the same rows as our master's RunResult.
 - Errors: a step an FMU refuses fails the step; `simulate_until` returns False, the process lives
@@ -198,12 +198,12 @@ def _set_initial_values(execution, slaves: dict, variables: dict, params: list) 
             raise EngineError(f"parameter {p.name}: libcosim refused it: {reason}")
 
 
-# --- other engines' time grids and start values, for Master(step_times=..., zero_start_inputs=)
+# --- other engines' time grids and start values, for RunOptions(step_times=..., zero_start_inputs=)
 
 
 class AccumulatedTimes:
     """Step times t_i+1 = t_i + h accumulated in floating point, as fmpy's simulate_ssp and ecospy
-    step (a callable for Master(step_times=...): step i -> (t_i, h))."""
+    step (a callable for RunOptions(step_times=...): step i -> (t_i, h))."""
 
     def __init__(self, start: float, step: float) -> None:
         self.step = step

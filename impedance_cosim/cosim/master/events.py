@@ -13,14 +13,17 @@ recorded rows stay at the grid points; the event times are in EventExactMaster.e
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 from pathlib import Path
 from typing import Any
 
 from impedance_cosim.cosim.fmus.fmi2 import STATUS, FmuError, FmuInstance
 from impedance_cosim.cosim.fmus.fmi3 import FmuInstance3, open_fmu
 from impedance_cosim.cosim.master.master import Master
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.setup import MasterError
 from impedance_cosim.cosim.results.result import RunResult
+from impedance_cosim.cosim.ssp.read import SystemDescription
 
 MAX_EVENTS_PER_STEP = 100  # a hang guard: contact chattering inside one communication step
 
@@ -110,13 +113,11 @@ class EventExactMaster(Master):
     after run(), events (and the result's info["events"]) maps each such component to its
     event times."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        for taken in ("loop", "instances"):
-            if kwargs.get(taken) not in (None, "auto", "python"):
-                got = kwargs[taken]
-                raise MasterError(f"event-exact stepping sets {taken} itself (got {got!r})")
-        kwargs.update(loop="python", instances=_Opener())
-        super().__init__(*args, **kwargs)
+    def __init__(self, system: SystemDescription, options: RunOptions | None = None) -> None:
+        options = options or RunOptions()
+        if options.loop not in ("auto", "python"):
+            raise MasterError(f"event-exact stepping sets loop itself (got {options.loop!r})")
+        super().__init__(system, dataclasses.replace(options, loop="python"), _Opener())
         if not any(has_event_mode(md) for md in self.descriptions.values()):
             raise MasterError("event-exact stepping needs an FMI 3.0 co-simulation FMU with event"
                               " mode (hasEventMode), and no component has one: use the FMI 3.0"

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import sys
 import time as wallclock
-from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -42,14 +41,13 @@ from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
 from impedance_cosim.cosim.fmus.fmi3 import open_fmu
 from impedance_cosim.cosim.master import c_loop, realtime
 from impedance_cosim.cosim.master import extrapolation as extra
+from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.master.realtime import RealtimeOptions, realtime_stats
 from impedance_cosim.cosim.master.setup import (
-    ALGORITHMS,
     MasterError,
     collect_parameters,
     read_descriptions,
     real_outputs,
-    step_count,
 )
 from impedance_cosim.cosim.results.result import Divergence, Feed, RunResult, Sink, size_problem
 from impedance_cosim.cosim.ssp.read import SspError, SystemDescription
@@ -81,50 +79,21 @@ class Master:
     def __init__(
         self,
         system: SystemDescription,
-        parameter_set: str | None = None,
-        overrides: Mapping[str, Any] | None = None,
-        algorithm: str | None = None,
-        step_size: float | None = None,
-        stop_time: float | None = None,
-        divergence_limit: float = 1e6,
-        fmu_files: Mapping[str, Path] | None = None,
-        loop: str = "auto",
-        realtime: bool | RealtimeOptions = False,
-        step_times: Callable[[int], tuple[float, float]] | None = None,
-        zero_start_inputs: bool = False,
+        options: RunOptions | None = None,
         instances: Any = None,
-        overrides_origin: str = "in overrides",
-        extrapolation: str = "none",
     ) -> None:
+        """Check the options against the system and read its FMUs' descriptions (MasterError).
+
+        instances: an fmu_pool.InstancePool, to reuse FMU instances across runs."""
         self.system = system
-        # Another engine's conventions, to compare with it (Python loop only; engines.py has
-        # them): step_times(i) gives step i's start time and length (default t_0 + i h, h);
-        # zero_start_inputs: the first step's connected inputs are 0.0, not the initialized
-        # outputs (with Jacobi).
-        self.step_times = step_times
-        self.zero_start_inputs = zero_start_inputs
-        self.algorithm = algorithm or system.algorithm or "gauss-seidel"
-        if self.algorithm not in ALGORITHMS:
-            raise MasterError(f"algorithm must be one of {ALGORITHMS} (got {self.algorithm!r})")
-        self.step_size = step_size if step_size is not None else system.step_size
+        self.options = options = (options or RunOptions()).for_system(system)
+        self.algorithm = options.algorithm
+        self.step_size = options.step_size
         self.start_time = system.start_time
-        self.stop_time = stop_time if stop_time is not None else system.stop_time
-        steps = step_count(self.start_time, self.stop_time, self.step_size)
-        self.divergence_limit = divergence_limit
-        if loop not in ("auto", "c", "python"):
-            raise MasterError(f"loop must be auto, c or python (got {loop!r})")
-        if (step_times or zero_start_inputs) and (loop == "c" or realtime):
-            raise MasterError("step_times and zero_start_inputs need the Python loop")
-        if zero_start_inputs and self.algorithm != "jacobi":
-            raise MasterError("zero_start_inputs needs the Jacobi algorithm")
-        if extrapolation != "none" and zero_start_inputs:
-            raise MasterError(f"extrapolation {extrapolation!r} needs the initialized outputs as"
-                              " first inputs (not zero_start_inputs)")  # fmt: skip
-        self.extrapolation = extrapolation
-        loop = "python" if step_times or zero_start_inputs else loop
-        self.loop = loop
-        self.realtime = realtime
-        self.instances = instances  # an fmu_pool.InstancePool: reuse FMU instances across runs
+        self.stop_time = options.stop_time
+        steps = round((self.stop_time - self.start_time) / self.step_size)  # checked: whole
+        self.instances = instances
+        parameter_set = options.parameter_set
         sets = system.parameter_sets
         if parameter_set is None:
             parameter_set = next(iter(sets), "")
@@ -137,7 +106,7 @@ class Master:
             raise MasterError(f"the step order {order} does not list the components {names}")
         self.order = order
         self.fmu_files = {c.name: Path(c.fmu) for c in system.components}
-        for name, path in (fmu_files or {}).items():
+        for name, path in (options.fmu_files or {}).items():
             if name not in self.fmu_files:
                 raise MasterError(f"no component {name!r} to replace (have {names})")
             self.fmu_files[name] = Path(path)
@@ -147,14 +116,14 @@ class Master:
             parameter_set,
             self.descriptions,
             self.fmu_files,
-            overrides or {},
-            overrides_origin,  # where a bad override came from, for its message
+            options.overrides or {},
+            options.overrides_origin,  # where a bad override came from, for its message
         )
-        extra.check(extrapolation, self.algorithm, system.connections, self.descriptions,
+        extra.check(options.extrapolation, self.algorithm, system.connections, self.descriptions,
                     self.fmu_files)  # fmt: skip
         columns = 1 + sum(len(real_outputs(md)) for md in self.descriptions.values())
-        columns += len(RT_COLUMNS) if realtime else 0
-        too_big = size_problem(int(round(steps)), columns, self.stop_time, self.step_size)
+        columns += len(RT_COLUMNS) if options.realtime else 0
+        too_big = size_problem(steps, columns, self.stop_time, self.step_size)
         if too_big:
             raise MasterError(too_big)
 
@@ -180,12 +149,12 @@ class Master:
     def _run(self, progress: bool | TextIO, sink: Sink | None, stop: StopSignals) -> RunResult:
         outputs = {n: real_outputs(self.descriptions[n]) for n in self.order}
         names = ["time", *(f"{n}.{o}" for n in self.order for o in outputs[n])]
-        record = [*names, *RT_COLUMNS] if self.realtime else names
+        record = [*names, *RT_COLUMNS] if self.options.realtime else names
         h, t0 = self.step_size, self.start_time
         n = int(round((self.stop_time - t0) / h))
         data = np.empty((n + 1, len(names)))
         rows, error = 0, None
-        timing = np.zeros((n + 1, len(RT_COLUMNS))) if self.realtime else None
+        timing = np.zeros((n + 1, len(RT_COLUMNS))) if self.options.realtime else None
         info: dict[str, Any] = {}
         feed = Feed(sink, record)
         feed(data, rows, timing)
@@ -197,14 +166,14 @@ class Master:
             data[0] = (t0, *(v for s in ordered for v in s.values))
             rows = 1
             feed(data, rows, timing)
-            if self.extrapolation != "none":
+            if self.options.extrapolation != "none":
                 extra.prepare(ordered)  # the sources' output derivatives at t_0
             error = self._check_row(names, data[0], t0)
             fast, step = self._stepper(ordered, data)
             stepping = wallclock.perf_counter()
-            if self.realtime and not error:
-                rt = self.realtime if isinstance(self.realtime, RealtimeOptions) else None
-                rt = rt or RealtimeOptions()
+            if self.options.realtime and not error:
+                rt = self.options.realtime
+                rt = rt if isinstance(rt, RealtimeOptions) else RealtimeOptions()
                 with realtime.applied(rt) as notes:
                     rows, error = realtime.paced_steps(
                         lambda i: step(ordered, data, names, i, 1),
@@ -235,7 +204,7 @@ class Master:
         data = data[:rows]
         divergence = error if isinstance(error, Divergence) else None
         error = None if error is None else str(error)
-        if self.realtime:
+        if self.options.realtime:
             names = record
             data = np.hstack((data, timing[:rows]))
         return RunResult(
@@ -269,16 +238,17 @@ class Master:
         """(the compiled loop or None, the step function): the C loop where it can run the
         system and is asked for or allowed, else the Python loop."""
         unsupported = c_loop.unsupported(ordered)
-        if self.loop == "c" and unsupported:
+        if self.options.loop == "c" and unsupported:
             raise MasterError(f"the C loop cannot run this system: {unsupported}")
-        fast = c_loop.load() if self.loop != "python" and not unsupported else None
-        if self.loop == "c" and fast is None:
+        fast = c_loop.load() if self.options.loop != "python" and not unsupported else None
+        if self.options.loop == "c" and fast is None:
             raise MasterError("the C loop cannot be compiled here (no C compiler?)")
         if not fast:
             return None, self._python_steps
+        options = self.options
         return fast, c_loop.stepper(fast, ordered, data, self.algorithm == "jacobi",
-                                      self.start_time, self.step_size, self.divergence_limit,
-                                      self._check_row, self.extrapolation != "none")  # fmt: skip
+                                      self.start_time, self.step_size, options.divergence_limit,
+                                      self._check_row, options.extrapolation != "none")  # fmt: skip
 
     def _release(self, ordered: list[_Slot], error) -> None:
         """Terminate each FMU and free it, or give it back to the pool (reset) when it ended
@@ -313,12 +283,13 @@ class Master:
         """Steps first .. first + count - 1 in Python; returns (rows filled, error or None)."""
         h, t0 = self.step_size, self.start_time
         jacobi = self.algorithm == "jacobi"
-        extrapolate = self.extrapolation != "none"
+        extrapolate = self.options.extrapolation != "none"
+        step_times, zero_start = self.options.step_times, self.options.zero_start_inputs
         for i in range(first, first + count):
-            t, h_i = self.step_times(i) if self.step_times else (t0 + i * h, h)
+            t, h_i = step_times(i) if step_times else (t0 + i * h, h)
             try:
                 if jacobi:
-                    zero = self.zero_start_inputs and i == 0
+                    zero = zero_start and i == 0
                     for s in ordered:
                         if extrapolate:
                             s.write(extra.inputs(s, ordered, h_i))
@@ -383,8 +354,9 @@ class Master:
 
     def _check_row(self, names: list[str], row: np.ndarray, t: float) -> Divergence | None:
         """The first signal of row beyond the divergence limit (or not finite), or None."""
-        bad = ~np.isfinite(row) | (np.abs(row) > self.divergence_limit)
+        limit = self.options.divergence_limit
+        bad = ~np.isfinite(row) | (np.abs(row) > limit)
         if not bad.any():
             return None
         k = int(np.argmax(bad))
-        return Divergence(float(t), names[k], float(row[k]), self.divergence_limit)
+        return Divergence(float(t), names[k], float(row[k]), limit)

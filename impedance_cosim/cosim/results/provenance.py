@@ -96,11 +96,11 @@ def run_entry(
             c: {k: _plain(v) for k, v in p.items()} for c, p in master.parameters.items()
         },
         "algorithm": master.algorithm,
-        "extrapolation": getattr(master, "extrapolation", "none"),
+        "extrapolation": master.options.extrapolation,
         "step_size": master.step_size,
         "start_time": master.start_time,
         "stop_time": master.stop_time,
-        "realtime": bool(master.realtime),
+        "realtime": bool(master.options.realtime),
         "fmus": fmus,
     }
     if result is not None:

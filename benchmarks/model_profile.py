@@ -78,7 +78,7 @@ def fmi_layer(stop: float) -> tuple[float, float]:
     system = read_ssp(DEFAULT_OUT / "PaperScenario.ssp")
     Master(system, RunOptions(stop_time=0.01)).run()  # loads the FMUs' modules
     inside = [0.0]
-    slaves = [m.ModelSlave for n, m in list(sys.modules.items()) if n.endswith(".fmi.slave")]
+    slaves = [m.ModelSlave for n, m in list(sys.modules.items()) if n.endswith(".fmi.fmi2_slave")]
     for cls in {c for c in slaves if c.__module__.startswith("impedance_cosim_")}:
         for name in ("do_step", "get_real", "set_real"):
             setattr(cls, name, _timed(getattr(cls, name), inside))

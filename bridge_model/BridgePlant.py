@@ -10,7 +10,7 @@ leave the Python interpreter in a state that crashes the next FMU call: never ra
 from pythonfmu import Fmi2Slave
 
 from bridge_model.model import BridgeModel
-from impedance_cosim.fmi.slave import ModelSlave, hold_slave_module
+from impedance_cosim.fmi.fmi2_slave import ModelSlave, hold_slave_module
 
 hold_slave_module(__name__)
 

@@ -4,7 +4,7 @@ controller_model.model.ControllerModel."""
 from pythonfmu import Fmi2Slave
 
 from controller_model.model import ControllerModel
-from impedance_cosim.fmi.slave import ModelSlave, hold_slave_module
+from impedance_cosim.fmi.fmi2_slave import ModelSlave, hold_slave_module
 
 hold_slave_module(__name__)
 

@@ -5,7 +5,7 @@ summary, provenance); `impedance_cosim.sweep(...)` runs it over values of one pa
 impedance_cosim/api.py).
 
 This package's model modules (physics, fmi) and this file are bundled into the FMUs and must
-import nothing beyond the standard library (and pythonfmu in fmi.slave): the API is imported
+import nothing beyond the standard library (and pythonfmu in fmi.fmi2_slave): the API is imported
 only when first used (module __getattr__), so `import impedance_cosim` stays light. The version
 lives in impedance_cosim/version.py: lower layers read it there, never from this facade.
 """

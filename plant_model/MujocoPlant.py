@@ -3,7 +3,7 @@ plant_model.mujoco_plant.MujocoPlantModel."""
 
 from pythonfmu import Fmi2Slave
 
-from impedance_cosim.fmi.slave import ModelSlave, hold_slave_module
+from impedance_cosim.fmi.fmi2_slave import ModelSlave, hold_slave_module
 from plant_model.mujoco_plant import MujocoPlantModel
 
 hold_slave_module(__name__)

@@ -3,7 +3,7 @@ plant_model.urdf_plant.PinocchioPlantModel."""
 
 from pythonfmu import Fmi2Slave
 
-from impedance_cosim.fmi.slave import ModelSlave, hold_slave_module
+from impedance_cosim.fmi.fmi2_slave import ModelSlave, hold_slave_module
 from plant_model.urdf_plant import PinocchioPlantModel
 
 hold_slave_module(__name__)

@@ -2,7 +2,7 @@
 
 from pythonfmu import Fmi2Slave
 
-from impedance_cosim.fmi.slave import ModelSlave, hold_slave_module
+from impedance_cosim.fmi.fmi2_slave import ModelSlave, hold_slave_module
 from plant_model.model import PlantModel
 
 hold_slave_module(__name__)

@@ -1,4 +1,4 @@
-"""The Python FMUs as FMI 3.0 (pythonfmu3, fmi/slave3.py, build_fmi3.build_python_fmu3):
+"""The Python FMUs as FMI 3.0 (pythonfmu3, fmi/fmi3_slave.py, build_fmi3.build_python_fmu3):
 valid, the native FMI 3.0 FMUs' variables, our master's 20 s paper run equal to the FMI 2.0
 Python FMUs' bit for bit, FMU state save/restore, and bad parameters reported."""
 

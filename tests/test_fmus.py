@@ -154,7 +154,7 @@ def test_wrong_call_order_is_refused(fmu_dir):
 
 
 def test_two_instances_in_one_process(fmu_dir):
-    """pythonfmu 0.7.0 crashed on a second instance in one process (see fmi.slave)."""
+    """pythonfmu 0.7.0 crashed on a second instance in one process (see fmi.fmi2_slave)."""
     a = started(fmu_dir / PLANT, "a")
     b = started(fmu_dir / PLANT, "b", x0=0.4)
     a.free()

@@ -242,7 +242,7 @@ def case_nan_time(path: str) -> None:
     print("log=" + " | ".join(s.logs))
 
 
-# impedance_cosim.fmi.slave's state framing, restated: importing it here would make the FMU use
+# impedance_cosim.fmi.fmi2_slave's state framing, restated: importing it here would make the FMU use
 # this checkout's slave module instead of its own (one module cache per process)
 STATE_MAGIC, STATE_HEADER = b"IMPCPY2\n", struct.Struct(">8sQI")
 
@@ -425,7 +425,7 @@ def test_python_fmu_refuses_garbage_state_bytes(fmu_dir):
 
 
 def test_driver_frames_states_like_the_slave():
-    from impedance_cosim.fmi import slave
+    from impedance_cosim.fmi import fmi2_slave as slave
 
     assert (slave.STATE_MAGIC, slave.STATE_HEADER.format) == (STATE_MAGIC, STATE_HEADER.format)
 

@@ -1,8 +1,8 @@
 """The contract between a model's plain numeric code and the shared FMI layer.
 
 A model is a class with a variable table and four operations (build from parameters, step,
-outputs, state). It knows nothing about FMI; impedance_cosim.fmi.slave wraps any such class into a
-pythonfmu slave, and tests drive the class directly.
+outputs, state). It knows nothing about FMI; impedance_cosim.fmi.fmi2_slave wraps any such class
+into a pythonfmu slave, and tests drive the class directly.
 """
 
 from __future__ import annotations

@@ -111,7 +111,7 @@ SCRIPT3 = '''"""pythonfmu3 slave script of {name} as FMI 3.0: a thin shell over 
 
 from pythonfmu3 import Fmi3Slave
 
-from impedance_cosim.fmi.slave3 import ModelSlave3
+from impedance_cosim.fmi.fmi3_slave import ModelSlave3
 from {module} import {cls}
 
 

@@ -6,7 +6,7 @@
  * instance.h) drives any model through these functions on the Data below; the FMI 2.0 glue
  * (fmi2_glue.c) and the FMI 3.0 glue (fmi3_*.c) call the core.
  *
- * Conventions mirror the Python FMUs (impedance_cosim/fmi/slave.py):
+ * Conventions mirror the Python FMUs (impedance_cosim/fmi/fmi2_slave.py):
  * - variables are stored by value reference: Real in r[], Integer and Boolean in i[], String in s[];
  * - model_initialize builds the initial state and outputs from parameters and inputs (it may be
  *   called several times during initialization mode, whenever a getter needs fresh outputs);

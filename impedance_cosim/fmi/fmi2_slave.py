@@ -48,7 +48,7 @@ class ModelSlave:
     """Mixin for pythonfmu.Fmi2Slave (list it first among the bases)."""
 
     model_class: type[FmuModel]
-    # the exporter's API (pythonfmu 0.7 here; slave3.py swaps in pythonfmu3's for FMI 3.0)
+    # the exporter's API (pythonfmu 0.7 here; fmi3_slave.py swaps in pythonfmu3's for FMI 3.0)
     _var_types: dict[str, Any] = _PY_VAR
     _causality: Any = Fmi2Causality
     _variability: Any = Fmi2Variability

@@ -1,5 +1,5 @@
-"""The FMI 3.0 variant of the glue layer (slave.py) for pythonfmu3: the same ModelSlave mixin on
-pythonfmu3's variable types (Float64, Int32, Boolean, String) and enums, plus the `independent`
+"""The FMI 3.0 variant of the glue layer (fmi2_slave.py) for pythonfmu3: the same ModelSlave mixin
+on pythonfmu3's variable types (Float64, Int32, Boolean, String) and enums, plus the `independent`
 time variable FMI 3.0 requires, registered after the table (value reference = table size, as in
 the native FMI 3.0 FMUs). A slave script lists it first among the bases:
 
@@ -14,7 +14,7 @@ from typing import Any
 from pythonfmu3 import Boolean, Float64, Fmi3Causality, Fmi3Variability, Int32, String
 from pythonfmu3.enums import Fmi3Status
 
-from impedance_cosim.fmi.slave import ModelSlave
+from impedance_cosim.fmi.fmi2_slave import ModelSlave
 
 
 class ModelSlave3(ModelSlave):

@@ -153,14 +153,7 @@ def _model_variables(root: ET.Element, variables: list[Variable], index: dict[st
             type_attrs["declaredType"] = QUANTITIES[v.unit]
         if v.derivative:
             type_attrs["derivative"] = str(index[v.derivative])
-        if v.unit and v.type == "Real":
-            type_attrs["unit"] = v.unit
-            if v.unit in DISPLAY_UNITS:
-                type_attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
-        if v.min is not None:
-            type_attrs["min"] = xml_value(v.min)
-        if v.max is not None:
-            type_attrs["max"] = xml_value(v.max)
+        add_unit_and_range(type_attrs, v)
         if v.causality not in ("output", "local"):
             type_attrs["start"] = xml_value(v.start)
         ET.SubElement(sv, v.type, type_attrs)
@@ -233,6 +226,19 @@ def _type_definitions(root: ET.Element, units: list[str], variables: list[Variab
         text = f"{e.description}: {e.choices()}"
         st = ET.SubElement(types, "SimpleType", {"name": e.name, "description": text})
         ET.SubElement(st, "Integer", {"min": "1", "max": str(len(e.items))})
+
+
+def add_unit_and_range(attrs: dict[str, str], v: Variable) -> None:
+    """A variable's unit, display unit, min and max as attributes, in this order (FMI 2.0 and
+    3.0 write them alike)."""
+    if v.unit and v.type == "Real":
+        attrs["unit"] = v.unit
+        if v.unit in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
+    if v.min is not None:
+        attrs["min"] = xml_value(v.min)
+    if v.max is not None:
+        attrs["max"] = xml_value(v.max)
 
 
 def xml_value(value: float | int | bool | str) -> str:

@@ -9,7 +9,12 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-from impedance_cosim.fmi.fmi2_description import LOG_CATEGORIES, exact_dependencies, xml_value
+from impedance_cosim.fmi.fmi2_description import (
+    LOG_CATEGORIES,
+    add_unit_and_range,
+    exact_dependencies,
+    xml_value,
+)
 from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
 from impedance_cosim.fmi.variables import (
     METADATA,
@@ -194,16 +199,9 @@ def _variable3(
     enumeration = getattr(v, "enumeration", None)
     if enumeration:  # an Int32 of the enumeration's declared type (as in FMI 2.0)
         attrs.update(declaredType=enumeration.name, min="1", max=str(len(enumeration.items)))
-    if v.unit and v.type == "Real":
-        if v.unit in QUANTITIES:
-            attrs["declaredType"] = QUANTITIES[v.unit]
-        attrs["unit"] = v.unit
-        if v.unit in DISPLAY_UNITS:
-            attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
-    if v.min is not None:
-        attrs["min"] = xml_value(v.min)
-    if v.max is not None:
-        attrs["max"] = xml_value(v.max)
+    if v.unit and v.type == "Real" and v.unit in QUANTITIES:
+        attrs["declaredType"] = QUANTITIES[v.unit]
+    add_unit_and_range(attrs, v)
     start = v.causality not in ("output", "local")
     if start and v.type != "String":
         attrs["start"] = xml_value(v.start)

@@ -12,6 +12,7 @@ import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from impedance_cosim.fmi.fmi2_description import model_description
 from impedance_cosim.packaging import toolchains
@@ -362,13 +363,21 @@ def _model_description(
     """modelDescription.xml of a model class, the same for both flavours but the tool name and
     the source file list."""
     return model_description(
-        model_name=cls.MODEL_NAME,
-        description=cls.DESCRIPTION,
         guid=guid,
-        variables=cls.variables(),
-        default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {__version__} ({flavour})",
-        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+        **model_fields(cls, flavour),
         source_files=source_files,
         model_exchange=model_exchange,
     )
+
+
+def model_fields(cls, flavour: str) -> dict[str, Any]:
+    """What the modelDescription.xml of a model class says about the model, FMI 2.0 and 3.0
+    alike (flavour: how it was built, for the generation tool)."""
+    return {
+        "model_name": cls.MODEL_NAME,
+        "description": cls.DESCRIPTION,
+        "variables": cls.variables(),
+        "default_experiment": cls.DEFAULT_EXPERIMENT,
+        "generation_tool": f"impedance_cosim {__version__} ({flavour})",
+        "output_dependencies": cls.OUTPUT_DEPENDENCIES,
+    }

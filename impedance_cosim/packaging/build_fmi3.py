@@ -36,12 +36,12 @@ from impedance_cosim.packaging.build import (
     _info,
     _native_sources,
     build_ssp,
+    model_fields,
     pack_native_fmu,
 )
 from impedance_cosim.packaging.build_ssp2 import build_ssp2
 from impedance_cosim.packaging.isolate import content_tag, isolate
 from impedance_cosim.packaging.pyfmu_guard import guard_binaries
-from impedance_cosim.version import __version__
 
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 FMI3_GLUE = (
@@ -67,13 +67,8 @@ EARLY_RETURN = {"plant"}
 
 def _xml(cls, token: str, clock: SampleClock | None, early: bool) -> bytes:
     return model_description3(
-        model_name=cls.MODEL_NAME,
-        description=cls.DESCRIPTION,
         token=token,
-        variables=cls.variables(),
-        default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {__version__} (native C99, FMI 3.0)",
-        output_dependencies=cls.OUTPUT_DEPENDENCIES,
+        **model_fields(cls, "native C99, FMI 3.0"),
         model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
         clock=clock,
         early_return=early,
@@ -167,15 +162,7 @@ def _stage_python(spec: FmuSpec, stage: Path) -> None:
 
 
 def _xml_python(cls, token: str) -> bytes:
-    return model_description3(
-        model_name=cls.MODEL_NAME,
-        description=cls.DESCRIPTION,
-        token=token,
-        variables=cls.variables(),
-        default_experiment=cls.DEFAULT_EXPERIMENT,
-        generation_tool=f"impedance_cosim {__version__} (pythonfmu3, FMI 3.0)",
-        output_dependencies=cls.OUTPUT_DEPENDENCIES,
-    )
+    return model_description3(token=token, **model_fields(cls, "pythonfmu3, FMI 3.0"))
 
 
 def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:

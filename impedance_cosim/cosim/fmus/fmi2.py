@@ -211,20 +211,24 @@ class FmuInstance:
             detail = self.error_detail()
             raise FmuError(f"{self.name}: doStep at t={t} returned {STATUS[status]} ({detail})")
 
+    # fmpy's names of the FMU state functions (FMI 3.0 spells them otherwise: FmuInstance3)
+    _STATE_CALLS = {"get": "getFMUstate", "set": "setFMUstate", "free": "freeFMUstate",
+                    "serialize": "serializeFMUstate", "deserialize": "deSerializeFMUstate"}  # fmt: skip
+
     def get_state(self) -> Any:
-        return self._call("getFMUstate")
+        return self._call(self._STATE_CALLS["get"])
 
     def set_state(self, state: Any) -> None:
-        self._call("setFMUstate", state)
+        self._call(self._STATE_CALLS["set"], state)
 
     def free_state(self, state: Any) -> None:
-        self._call("freeFMUstate", state)
+        self._call(self._STATE_CALLS["free"], state)
 
     def serialize_state(self, state: Any) -> bytes:
-        return bytes(self._call("serializeFMUstate", state))
+        return bytes(self._call(self._STATE_CALLS["serialize"], state))
 
     def deserialize_state(self, data: bytes) -> Any:
-        return self._call("deSerializeFMUstate", bytes(data))
+        return self._call(self._STATE_CALLS["deserialize"], bytes(data))
 
     def reset(self) -> None:
         """fmi2Reset: back to the state after instantiation (start values), ready for reuse."""

@@ -46,6 +46,8 @@ class FmuInstance3(FmuInstance):
     """An instantiated FMI 3.0 co-simulation FMU (see module docstring)."""
 
     _interface = FMU3Slave
+    _STATE_CALLS = {"get": "getFMUState", "set": "setFMUState", "free": "freeFMUState",
+                    "serialize": "serializeFMUState", "deserialize": "deserializeFMUState"}  # fmt: skip
 
     def _load(self, unzip_dir: str, logging_on: bool) -> None:
         self.variables = {v.name: v for v in self.description.modelVariables}
@@ -132,21 +134,6 @@ class FmuInstance3(FmuInstance):
         status = self._do_step(self.slave.component, t, h, True, *self._step_refs)
         if status > 1:
             raise self._fail(f"doStep at t={t} returned {STATUS[status]}", status)
-
-    def get_state(self) -> Any:
-        return self._call("getFMUState")
-
-    def set_state(self, state: Any) -> None:
-        self._call("setFMUState", state)
-
-    def free_state(self, state: Any) -> None:
-        self._call("freeFMUState", state)
-
-    def serialize_state(self, state: Any) -> bytes:
-        return bytes(self._call("serializeFMUState", state))
-
-    def deserialize_state(self, data: bytes) -> Any:
-        return self._call("deserializeFMUState", bytes(data))
 
 
 class ClockedInstance(FmuInstance3):

@@ -29,19 +29,8 @@ typedef char part_data_fits[sizeof(Data) <= sizeof(PartData) ? 1 : -1];
 /* The part's start values, as its own FMU's fmi2Instantiate sets them. */
 void PART(part_start)(PartData *p, double start_time)
 {
-    Data *d = AS_DATA(p);
     memset(p, 0, sizeof *p);
-    for (int vr = 0; vr < N_VARS; vr++) {
-        const VarInfo *v = &VARS[vr];
-        if (v->type == T_REAL) {
-            d->r[vr] = v->start;
-        } else if (v->type == T_STRING) {
-            strncpy(d->s[vr], v->start_string ? v->start_string : "", STRING_MAX - 1);
-        } else {
-            d->i[vr] = (int)v->start;
-        }
-    }
-    d->start_time = start_time;
+    data_start(AS_DATA(p), start_time);
 }
 
 void PART(part_set_real)(PartData *p, int vr, double value) { AS_DATA(p)->r[vr] = value; }

@@ -21,6 +21,7 @@
 #define GLUE_H
 
 #include <stddef.h>
+#include <string.h>
 
 #define STRING_MAX 64
 #define MSG_MAX 512
@@ -59,6 +60,24 @@ typedef struct {
     ModelState m;
     double start_time;
 } Data;
+
+/* Data at the variables' start values, everything else zero: what instantiation and reset give
+ * (the instance core, the closed loop's parts and the model tests' shim all start from it). */
+static inline void data_start(Data *d, double start_time)
+{
+    memset(d, 0, sizeof *d);
+    for (int vr = 0; vr < N_VARS; vr++) {
+        const VarInfo *v = &VARS[vr];
+        if (v->type == T_REAL) {
+            d->r[vr] = v->start;
+        } else if (v->type == T_STRING) {
+            strncpy(d->s[vr], v->start_string ? v->start_string : "", STRING_MAX - 1);
+        } else {
+            d->i[vr] = (int)v->start;
+        }
+    }
+    d->start_time = start_time;
+}
 
 int model_initialize(Data *d, char *msg);
 int model_step(Data *d, double t, double h, char *msg);

@@ -94,21 +94,6 @@ int instance_ok(const Instance *inst, const char *function)
     return 1;
 }
 
-static void set_start_values(Data *d)
-{
-    memset(d, 0, sizeof *d);
-    for (int vr = 0; vr < N_VARS; vr++) {
-        const VarInfo *v = &VARS[vr];
-        if (v->type == T_REAL) {
-            d->r[vr] = v->start;
-        } else if (v->type == T_STRING) {
-            strncpy(d->s[vr], v->start_string ? v->start_string : "", STRING_MAX - 1);
-        } else {
-            d->i[vr] = (int)v->start;
-        }
-    }
-}
-
 /* A parameter value the model can accept at all: finite, and not below its minimum. */
 int check_parameter(int vr, double value, char *msg)
 {
@@ -206,7 +191,7 @@ fmi2Component instance_new(fmi2String instanceName, fmi2Type fmuType, fmi2String
         free(inst);
         return NULL;
     }
-    set_start_values(&inst->s.d);
+    data_start(&inst->s.d, 0.0);
     inst->s.phase = S_INSTANTIATED;
     inst->s.dirty = 1;
     return inst;
@@ -294,7 +279,7 @@ fmi2Status instance_reset(fmi2Component c)
     if (!instance_ok(inst, "fmi2Reset")) {
         return fmi2Error;
     }
-    set_start_values(&inst->s.d);
+    data_start(&inst->s.d, 0.0);
     inst->s.phase = S_INSTANTIATED;
     inst->s.dirty = 1;
     inst->s.last_time = 0.0;

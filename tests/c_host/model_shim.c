@@ -25,20 +25,7 @@ double var_start(int vr) { return VARS[vr].start; }
 double *data_r(Data *d) { return d->r; }
 int *data_i(Data *d) { return d->i; }
 
-void data_init(Data *d, double start_time)
-{
-    memset(d, 0, sizeof *d);
-    for (int vr = 0; vr < N_VARS; vr++) {
-        if (VARS[vr].type == T_REAL) {
-            d->r[vr] = VARS[vr].start;
-        } else if (VARS[vr].type == T_STRING) {
-            strncpy(d->s[vr], VARS[vr].start_string, STRING_MAX - 1);
-        } else {
-            d->i[vr] = (int)VARS[vr].start;
-        }
-    }
-    d->start_time = start_time;
-}
+void data_init(Data *d, double start_time) { data_start(d, start_time); }
 
 void data_set_string(Data *d, int vr, const char *s)
 {

@@ -56,18 +56,14 @@ class FmuInstance:
             self._release()
             raise
 
-    def _load(self, unzip_dir: str, logging_on: bool) -> None:
-        self.variables = {v.name: v for v in self.description.modelVariables}
-        self.messages: list[tuple[str, str, str]] = []  # (status, category, message)
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    def _open(self, cls: type, unzip_dir: str, interface: Any) -> Any:
+        """fmpy's object (cls) over the library of the FMU's interface; FmuError naming the FMU
+        when the library does not load."""
         try:
-            self.slave = FMU2Slave(
+            return cls(
                 guid=self.description.guid,
                 unzipDirectory=unzip_dir,
-                modelIdentifier=self.description.coSimulation.modelIdentifier,
+                modelIdentifier=interface.modelIdentifier,
                 instanceName=self.name,
             )
         except Exception as exc:  # fmpy raises bare Exceptions when the library does not load
@@ -75,6 +71,15 @@ class FmuInstance:
             raise FmuError(
                 f"{self.name}: cannot load the binary of {self.path.name}: {text}"
             ) from None
+
+    def _load(self, unzip_dir: str, logging_on: bool) -> None:
+        self.variables = {v.name: v for v in self.description.modelVariables}
+        self.messages: list[tuple[str, str, str]] = []  # (status, category, message)
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self.slave = self._open(FMU2Slave, unzip_dir, self.description.coSimulation)
         self.fatal = False  # an fmi2Fatal status was returned: no further call is allowed
         try:
             self._call("instantiate", callbacks=self._callbacks, loggingOn=logging_on)
@@ -212,8 +217,13 @@ class FmuInstance:
             raise FmuError(f"{self.name}: doStep at t={t} returned {STATUS[status]} ({detail})")
 
     # fmpy's names of the FMU state functions (FMI 3.0 spells them otherwise: FmuInstance3)
-    _STATE_CALLS = {"get": "getFMUstate", "set": "setFMUstate", "free": "freeFMUstate",
-                    "serialize": "serializeFMUstate", "deserialize": "deSerializeFMUstate"}  # fmt: skip
+    _STATE_CALLS = {
+        "get": "getFMUstate",
+        "set": "setFMUstate",
+        "free": "freeFMUstate",
+        "serialize": "serializeFMUstate",
+        "deserialize": "deSerializeFMUstate",
+    }
 
     def get_state(self) -> Any:
         return self._call(self._STATE_CALLS["get"])

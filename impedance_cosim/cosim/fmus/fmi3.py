@@ -46,26 +46,20 @@ class FmuInstance3(FmuInstance):
     """An instantiated FMI 3.0 co-simulation FMU (see module docstring)."""
 
     _interface = FMU3Slave
-    _STATE_CALLS = {"get": "getFMUState", "set": "setFMUState", "free": "freeFMUState",
-                    "serialize": "serializeFMUState", "deserialize": "deserializeFMUState"}  # fmt: skip
+    _STATE_CALLS = {
+        "get": "getFMUState",
+        "set": "setFMUState",
+        "free": "freeFMUState",
+        "serialize": "serializeFMUState",
+        "deserialize": "deserializeFMUState",
+    }
 
     def _load(self, unzip_dir: str, logging_on: bool) -> None:
         self.variables = {v.name: v for v in self.description.modelVariables}
         self.messages: list[tuple[str, str, str]] = []
         self._logger = fmi3LogMessageCallback(self._log3)
         interface = self.description.coSimulation or self.description.scheduledExecution
-        try:
-            self.slave = self._interface(
-                guid=self.description.guid,
-                unzipDirectory=unzip_dir,
-                modelIdentifier=interface.modelIdentifier,
-                instanceName=self.name,
-            )
-        except Exception as exc:  # fmpy raises bare Exceptions when the library does not load
-            text = str(exc).replace(unzip_dir + "/", "")
-            raise FmuError(
-                f"{self.name}: cannot load the binary of {self.path.name}: {text}"
-            ) from None
+        self.slave = self._open(self._interface, unzip_dir, interface)
         self.fatal = False
         self.start_time, self.stop_time = 0.0, None
         try:

@@ -65,13 +65,15 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     tmp = tmp_path_factory.mktemp("native_controller")
     shim = tmp / "shim.c"
     shim.write_text(SHIM)
-    objs = [tmp / n for n in ("model.o", "arm_terms.o", "shim.o", "pyrepr.o", "model_shim.o")]
+    names = ("model.o", "arm_terms.o", "shim.o", "pyrepr.o", "model_shim.o", "fail.o")
+    objs = [tmp / n for n in names]
     try:
         _compile([ROOT / "native" / "controller" / "model.c"], objs[0], werror=True)
         _compile([ROOT / "native" / "src" / "arm_terms.c"], objs[1], werror=False)
         _compile([shim], objs[2], werror=True)
         _compile([ROOT / "native" / "src" / "pyrepr.c"], objs[3], werror=True)
         _compile([ROOT / "tests" / "c_host" / "model_shim.c"], objs[4], werror=True)
+        _compile([ROOT / "native" / "src" / "fail.c"], objs[5], werror=True)
     except subprocess.CalledProcessError as exc:
         pytest.fail(f"compilation failed:\n{exc.stderr}")
     so = tmp / "controller_test.so"

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C c
 
 REPO = Path(__file__).resolve().parent.parent
 SOURCES = ["native/plant/model.c", "native/plant/model_me.c", "native/src/wall.c",
-           "native/src/ode.c", "native/src/pyrandom.c", "native/src/pyrepr.c",
+           "native/src/fail.c", "native/src/ode.c", "native/src/pyrandom.c", "native/src/pyrepr.c",
            "native/src/arm_terms.c", "native/src/arm_partials.c"]  # fmt: skip
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror"]
 MSG_MAX = 512

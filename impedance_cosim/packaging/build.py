@@ -189,8 +189,9 @@ def _rewrite_model_description(raw: Path, target: Path, spec: FmuSpec) -> None:
 NATIVE = REPO / "native"
 # every native FMU's sources, whatever its FMI version: the model API (glue.h, model_me.h,
 # model_partials.h), the instance core, the arm, the integrator
-NATIVE_SHARED = ("glue.h", "instance.h", "instance.c", "instance_values.c", "instance_state.c",
-                 "instance_me.c", "model_me.h", "linalg3.h", "arm.h", "arm_terms.c", "arm_terms.h",
+NATIVE_SHARED = ("glue.h", "fail.c", "instance.h", "instance.c", "instance_values.c",
+                 "instance_state.c", "instance_me.c", "model_me.h", "linalg3.h", "arm.h",
+                 "arm_terms.c", "arm_terms.h",
                  "ode.c", "ode.h", "pyrandom.c", "pyrandom.h", "wall.c", "wall.h",
                  "pyrepr.c", "pyrepr.h",
                  "arm_partials.c", "arm_partials.h", "partials.c", "partials.h",

@@ -30,15 +30,6 @@
 
 #define INSTANCE_MAGIC 0x494d5049u /* "IMPI" */
 
-int fail(char *msg, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, MSG_MAX, fmt, ap);
-    va_end(ap);
-    return 1;
-}
-
 void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...)
 {
     char text[MSG_MAX + 64];

@@ -1,21 +1,10 @@
 /* Test shim of the native model tests (tests/test_native_plant_model.py,
  * tests/test_native_controller_model.py): a model's model.c driven through ctypes without the FMI
- * layer. fail() stands in for the instance core's; the rest gives ctypes access to Data and steps
- * as the glue does (on a copy, kept only on success). Compiled with one model's config.h. */
-#include <stdarg.h>
-#include <stdio.h>
+ * layer (linked with native/src/fail.c): ctypes access to Data, and steps as the glue does (on
+ * a copy, kept only on success). Compiled with one model's config.h. */
 #include <string.h>
 
 #include "glue.h"
-
-int fail(char *msg, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, MSG_MAX, fmt, ap);
-    va_end(ap);
-    return 1;
-}
 
 size_t data_size(void) { return sizeof(Data); }
 size_t state_size(void) { return sizeof(ModelState); }

@@ -24,12 +24,14 @@
 #ifdef FUZZ_FMI3
 #include "fmi3Functions.h"
 #include "glue.h" /* after the FMI header: N_VARS */
+#include "instance.h" /* crc32_update: re-signs a mutated state */
 typedef fmi3Instance Inst;
 typedef fmi3FMUState State;
 #define OK fmi3OK
 #else
 #include "fmi2Functions.h"
 #include "glue.h" /* after the FMI header: N_VARS */
+#include "instance.h" /* crc32_update: re-signs a mutated state */
 typedef fmi2Component Inst;
 typedef fmi2FMUstate State;
 #define OK fmi2OK
@@ -178,18 +180,6 @@ static void release(Inst c, State *s)
 static int snapshot(Inst c, State *s) { return fmi2GetFMUstate(c, s) != OK; }
 static int step(Inst c, double t) { return fmi2DoStep(c, t, DT, fmi2True) != OK; }
 #endif
-
-static uint32_t crc32_update(uint32_t crc, const uint8_t *p, size_t n)
-{
-    crc = ~crc;
-    while (n--) {
-        crc ^= *p++;
-        for (int k = 0; k < 8; k++) {
-            crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-        }
-    }
-    return ~crc;
-}
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {

@@ -12,6 +12,8 @@
 #ifndef INSTANCE_H
 #define INSTANCE_H
 
+#include <stdint.h>
+
 #include "fmi2Functions.h"
 #include "glue.h"
 
@@ -61,6 +63,10 @@ int initialize(Instance *inst);
 /* A parameter value the model can accept at all: finite, and not below its minimum (instance.c;
  * 0, or 1 with msg set). */
 int check_parameter(int vr, double value, char *msg);
+
+/* CRC-32 (IEEE 802.3, as zlib's crc32) of n bytes, continuing from crc (0 to start): the
+ * checksum of a serialized FMU state (instance_state.c; the state fuzzer re-signs with it). */
+uint32_t crc32_update(uint32_t crc, const unsigned char *p, size_t n);
 
 /* Log through the host's logger: errors always, other messages when logging is on. */
 void log_message(Instance *inst, fmi2Status status, const char *category, const char *fmt, ...);

@@ -198,7 +198,7 @@ fmi2Status instance_free_state(fmi2Component c, fmi2FMUstate *state)
 
 /* CRC-32 (IEEE 802.3, reflected, as zlib's crc32) of n bytes, continuing from crc (0 to start).
  * Bitwise and branch-free: states are a few kilobytes, serialized rarely. */
-static uint32_t crc32_update(uint32_t crc, const unsigned char *p, size_t n)
+uint32_t crc32_update(uint32_t crc, const unsigned char *p, size_t n)
 {
     crc = ~crc;
     while (n--) {

@@ -93,9 +93,11 @@ class Loop:
         return tau
 
     def event(self, t: float) -> float:
-        """Event Mode at t: the clock is active, the sample taken; the next tick."""
+        """Event Mode at t: the clock is active (fmi3GetClock, an answer the standard asks only
+        of output clocks; fmi3SetClock activates it), the sample taken; the next tick."""
         clock = self.ctrl.vr["sample_clock"]
         assert self.ctrl.fmu.getClock([clock]) == [True]
+        self.ctrl.fmu.setClock([clock], [True])  # the standard's activation of an input clock
         self.inputs()
         need, stop, _, _, defined, next_tick = self.ctrl.fmu.updateDiscreteStates()
         assert (need, stop, defined) == (False, False, True)

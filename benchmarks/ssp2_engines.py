@@ -3,7 +3,7 @@ docs/ssp2.md, as Markdown).
 
     python benchmarks/ssp2_engines.py [--stop 1.0]
 
-Each engine gets the FMI 3.0 system as SSP 1.0 (fmus/PaperScenario-fmi3.ssp, clock-free
+Each engine gets the FMI 3.0 system as SSP 1.0 (fmus/PaperScenario-fmi3.ssp, Co-Simulation
 controller) and as SSP 2.0 (fmus/PaperScenario-fmi3-ssp2.ssp, clocked controller), observer
 scenario, --stop seconds, each attempt in a process of its own (an engine may abort the process).
 A cell says whether it ran and, if not, the first line of its error; where it ran, the largest

@@ -123,7 +123,7 @@ def test_both_editions_give_the_same_csv_in_every_scenario(
     editions, scenario, algorithm, tmp_path, monkeypatch
 ):
     """1 s of each scenario: the 2.0 edition (clocked controller, ticked by our master) writes
-    the same CSV bytes as the 1.0 archive (clock-free controller)."""
+    the same CSV bytes as the 1.0 archive (Co-Simulation controller)."""
     ticks = []
     step = fmu3.ClockedInstance.step
 

@@ -74,15 +74,19 @@ def model_description3(
     clock: SampleClock | None = None,
     early_return: bool = False,
     naming: str = "flat",
+    cs_clock: SampleClock | None = None,
 ) -> bytes:
     """Complete FMI 3.0 modelDescription.xml: Co-Simulation and, with
     model_exchange, Model Exchange; with clock, Scheduled Execution instead of both, the model's
     inputs and outputs then clocked by it. output_dependencies as in the FMI 2.0 writer;
     early_return: fmi3DoStep may return early at the plant's contact, calls the intermediate
     update there and signals the event (event mode in Co-Simulation) if the importer asks;
-    naming: the variableNamingConvention, as in the FMI 2.0 writer."""
+    naming: the variableNamingConvention, as in the FMI 2.0 writer; cs_clock: the sample clock
+    of Co-Simulation with event mode (hasEventMode, early return at its ticks), its variables
+    not clocked: the same FMU serves importers without event mode and Model Exchange, which set
+    the inputs and read the outputs outside the clock's ticks (clocked, they could not)."""
     table = full_table(variables, model_exchange)
-    ext = extras(len(table), model_exchange, clock)
+    ext = extras(len(table), model_exchange, clock or cs_clock)
     vr_of = {v.name: vr for vr, v in enumerate(table)}
     root = ET.Element(
         "fmiModelDescription",
@@ -96,7 +100,7 @@ def model_description3(
             "variableNamingConvention": naming,
         },
     )
-    partials = _interfaces3(root, model_name, model_exchange, clock, early_return)
+    partials = _interfaces3(root, model_name, model_exchange, clock, early_return, cs_clock)
     used = sorted({v.unit for v in table if v.unit} | {"s"})
     add_unit_definitions(root, used)
     _type_definitions(root, [u for u in used if u in QUANTITIES], table)
@@ -119,7 +123,7 @@ def model_description3(
     )
     for vr, v in enumerate(table):
         _variable3(mv, vr, v, vr_of, ext.clock if clock else None, early_return)
-    _extra_variables3(mv, ext, clock)
+    _extra_variables3(mv, ext, clock or cs_clock)
     _model_structure3(root, table, vr_of, ext, output_dependencies, model_exchange, clock, partials)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
@@ -131,9 +135,11 @@ def _interfaces3(
     model_exchange: ModelExchange | None,
     clock: SampleClock | None,
     early_return: bool,
+    cs_clock: SampleClock | None = None,
 ) -> Partials | None:
-    """ScheduledExecution (with a clock), else ModelExchange (when given) and CoSimulation; the
-    model's Partials, if any (they add the directional and output derivatives)."""
+    """ScheduledExecution (with a clock), else ModelExchange (when given) and CoSimulation (with
+    cs_clock: event mode, early return at its ticks); the model's Partials, if any (they add the
+    directional and output derivatives)."""
     common = {
         "modelIdentifier": model_name,
         "needsExecutionTool": "false",
@@ -160,9 +166,10 @@ def _interfaces3(
             {
                 **common,
                 "canHandleVariableCommunicationStepSize": "true",
-                # the plant's contact switch: early return, intermediate update, event mode
-                "hasEventMode": xml_value(early_return),
-                "mightReturnEarlyFromDoStep": xml_value(early_return),
+                # the plant's contact switch: early return, intermediate update, event mode;
+                # the controller's clock ticks: early return, event mode
+                "hasEventMode": xml_value(early_return or cs_clock is not None),
+                "mightReturnEarlyFromDoStep": xml_value(early_return or cs_clock is not None),
                 "providesIntermediateUpdate": xml_value(early_return),
                 "canReturnEarlyAfterIntermediateUpdate": xml_value(early_return),
                 **orders,

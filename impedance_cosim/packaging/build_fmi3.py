@@ -4,7 +4,8 @@ The same model code (native/<model>/model.c, config.h) and the same variable tab
 native FMUs, and the same instance core (native/src/instance.c, instance_me.c); the glue is
 native/src/fmi3_*.c (FMI3_GLUE) instead of the FMI 2.0 glue. The FMUs:
 - PumaPlant.fmu: Co-Simulation and Model Exchange;
-- ImpedanceController.fmu: Co-Simulation (and Model Exchange), no clock: for any FMI 3 host;
+- ImpedanceController.fmu: Co-Simulation (and Model Exchange): for any FMI 3 host; with event
+  mode in Co-Simulation its sampling is the time-based clock `sample_clock` (CS_CLOCK);
 - ImpedanceControllerClocked.fmu: Scheduled Execution, its sampling as a periodic input clock
   (`sample_clock`, interval = the parameter sample_period), for hosts that schedule clocks;
 - python/PumaPlant.fmu, python/ImpedanceController.fmu: the Python FMUs as FMI 3.0 (pythonfmu3,
@@ -63,15 +64,18 @@ CLOCKED_NAME = "ImpedanceControllerClocked"  # file name of the clocked controll
 # models whose co-simulation returns early at a discrete-state switch when the importer allows it
 # (model.c implements model_step_early): the plant, at the wall contact
 EARLY_RETURN = {"plant"}
+# models whose Co-Simulation declares the sample clock: with eventModeUsed its ticks are events
+CS_CLOCK = {"controller"}
 
 
-def _xml(cls, token: str, clock: SampleClock | None, early: bool) -> bytes:
+def _xml(cls, token: str, clock: SampleClock | None, early: bool, cs_clock) -> bytes:
     return model_description3(
         token=token,
         **model_fields(cls, "native C99, FMI 3.0"),
         model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
         clock=clock,
         early_return=early,
+        cs_clock=cs_clock,
     )
 
 
@@ -84,21 +88,24 @@ def build_native_fmu3(
     cls = spec.load_model_class()
     me = getattr(cls, "MODEL_EXCHANGE", None)
     early = spec.key in EARLY_RETURN and clock is None
+    cs_clock = SAMPLE_CLOCK if spec.key in CS_CLOCK and clock is None else None
     sources = _native_sources(spec, FMI3_GLUE)
     headers = Path(fmpy.__file__).parent / "c-code"
     for name in FMI3_HEADERS:
         sources[name] = (headers / name).read_bytes()
     n_table = len(full_table(cls.variables(), me))
-    sources["fmi3_config.h"] = c_config3(n_table, me, clock, cls.variables(), early).encode()
+    sources["fmi3_config.h"] = c_config3(
+        n_table, me, clock or cs_clock, cls.variables(), early
+    ).encode()
     c_files = sorted(n for n in sources if n.endswith(".c"))
-    digest = hashlib.sha256(_xml(cls, "", clock, early))
+    digest = hashlib.sha256(_xml(cls, "", clock, early, cs_clock))
     for name in sorted(sources):
         digest.update(name.encode() + sources[name])
     token = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
     sources["buildDescription.xml"] = _build_description(cls.MODEL_NAME, c_files, "3.0")
     target = Path(out_dir) / f"{CLOCKED_NAME if clock else cls.MODEL_NAME}.fmu"
-    xml = _xml(cls, token, clock, early)
+    xml = _xml(cls, token, clock, early, cs_clock)
     return pack_native_fmu(target, xml, sources, c_files, cls.MODEL_NAME, fmi_version=3)
 
 
@@ -167,7 +174,7 @@ def _xml_python(cls, token: str) -> bytes:
 
 def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
     """fmus/fmi3/: the FMI 3.0 plant and controllers, PaperScenario-fmi3.ssp (the SSD of the
-    FMI 2.0 archive, with the FMI 3.0 plant and clock-free controller) and its SSP 2.0 edition
+    FMI 2.0 archive, with the FMI 3.0 plant and Co-Simulation controller) and its SSP 2.0 edition
     PaperScenario-fmi3-ssp2.ssp (the clocked controller, build_ssp2.py)."""
     folder = Path(out_dir) / "fmi3"
     built = [

@@ -87,3 +87,35 @@ int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
     ev->next = m->start_time + (double)m->k_next * p.ts;
     return 0;
 }
+
+/* --- Co-Simulation with event mode (FMI 3.0: the sample clock's ticks are events) ------------ */
+
+double model_next_tick(const Data *d)
+{
+    return d->m.start_time + (double)d->m.k_next * d->r[VR_sample_period];
+}
+
+/* The step from t: up to the first tick inside it where early is set (*reached: where it
+ * stopped), else to t + h sampling inside as model_step does; a tick at the step's end is left
+ * for Event Mode. A sample due at t was left to Event Mode and not taken there: refused. */
+int model_step_to_tick(Data *d, double t, double h, int early, double *reached, char *msg)
+{
+    const double tick = model_next_tick(d);
+    const double tol = TIME_TOL * d->r[VR_sample_period];
+    if (tick <= t + tol) {
+        char buf[32];
+        py_float_repr(tick, buf, sizeof buf);
+        return fail(msg, "the sample due at t=%s was not taken: fmi3EnterEventMode and "
+                         "fmi3UpdateDiscreteStates first (eventHandlingNeeded)", buf);
+    }
+    if (!early || !(tick < t + h - tol)) {
+        *reached = t + h;
+        return model_step(d, t, h, msg);
+    }
+    if (model_step(d, t, tick - t, msg)) { /* no sample: the tick is the step's end */
+        return 1;
+    }
+    d->m.t = tick;
+    *reached = tick;
+    return 0;
+}

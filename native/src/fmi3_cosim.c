@@ -7,7 +7,12 @@
  * switch time: the intermediate update there offers them (intermediateStepFinished, get allowed,
  * no input set requested). The step ends there (earlyReturn) only where the importer allowed early
  * return: with eventModeUsed (then with eventHandlingNeeded), without an intermediate update
- * callback, or when the callback requests it; else it goes on to the communication point. */
+ * callback, or when the callback requests it; else it goes on to the communication point.
+ *
+ * The controller (HAS_CLOCK) with eventModeUsed: its sample clock's ticks are the events. The
+ * step stops at a tick inside it where early return is allowed (else it samples inside as
+ * without event mode: the standard leaves events inside a step without early return to the FMU),
+ * a tick at its end signals eventHandlingNeeded; fmi3UpdateDiscreteStates takes the sample. */
 #include <string.h>
 
 #include "fmi3_wrapper.h"
@@ -54,6 +59,27 @@ State3 state_of_core(const Wrapper *w)
     return ST_TERMINATED;
 }
 
+#if HAS_CLOCK
+/* 1 if a sample is due at the instance's current time (not taken yet) */
+static int cs_tick_due(const Wrapper *w)
+{
+    const Data *d = &w->inner->s.d;
+    return model_next_tick(d) <= w->inner->s.last_time + 1e-9 * d->r[CLOCK_PERIOD_VR];
+}
+
+/* The sample due at the current time (model_me_event_update, as under Model Exchange). */
+static fmi3Status take_due_sample(Wrapper *w, fmi3Boolean *defined, fmi3Float64 *next)
+{
+    MeEvent ev = {0, 0, 0, 0.0};
+    if (model_me_event_update(&w->inner->s.d, w->inner->s.last_time, &ev, w->inner->msg)) {
+        return FAIL(w, "fmi3UpdateDiscreteStates: %s", w->inner->msg);
+    }
+    *defined = ev.next_defined ? fmi3True : fmi3False;
+    *next = ev.next;
+    return fmi3OK;
+}
+#endif
+
 /* Co-Simulation fmi3EnterEventMode: from Step Mode, where the importer used event mode. */
 fmi3Status cs_enter_event_mode(Wrapper *w)
 {
@@ -61,11 +87,15 @@ fmi3Status cs_enter_event_mode(Wrapper *w)
         return FAIL(w, "fmi3EnterEventMode: the instance was created with eventModeUsed=false");
     }
     w->state = ST_EVENT;
+#if HAS_CLOCK
+    w->tick_active = w->clock_events && cs_tick_due(w);
+#endif
     return fmi3OK;
 }
 
-/* Co-Simulation fmi3UpdateDiscreteStates, in Event Mode: the model step has already switched
- * the contact mode at the event and nothing else is discrete, so nothing changes here. */
+/* Co-Simulation fmi3UpdateDiscreteStates, in Event Mode: the plant's model step has already
+ * switched the contact mode at the event, so nothing changes there; the controller takes the
+ * sample due and tells the next tick. */
 fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeedUpdate,
                                      fmi3Boolean *terminateSimulation,
                                      fmi3Boolean *nominalsOfContinuousStatesChanged,
@@ -83,6 +113,11 @@ fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeed
     *valuesOfContinuousStatesChanged = fmi3False;
     *nextEventTimeDefined = fmi3False;
     *nextEventTime = 0.0;
+#if HAS_CLOCK
+    if (w->clock_events) {
+        return take_due_sample(w, nextEventTimeDefined, nextEventTime);
+    }
+#endif
     return fmi3OK;
 }
 
@@ -93,6 +128,7 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance)
         return FAIL(w, "fmi3EnterStepMode: only for co-simulation with eventModeUsed=true");
     }
     w->state = ST_STEP;
+    w->tick_active = 0;
     return fmi3OK;
 }
 
@@ -154,10 +190,18 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
             *earlyReturn = fmi3True;
             *eventHandlingNeeded = w->event_mode_used ? fmi3True : fmi3False;
             log_message(w->inner, fmi2OK, "logAll", "fmi3DoStep returns early at t=%.17g%s", t,
-                        w->event_mode_used ? " (event: the contact switched)" : "");
+                        !w->event_mode_used ? ""
+                        : w->clock_events   ? " (event: a clock tick)"
+                                            : " (event: the contact switched)");
             break;
         }
     }
+#if HAS_CLOCK
+    if (s == fmi2OK && w->clock_events) { /* at a tick: inside the step (early) or at its end */
+        w->tick_active = cs_tick_due(w);
+        *eventHandlingNeeded = w->tick_active ? fmi3True : fmi3False;
+    }
+#endif
     *lastSuccessfulTime = w->inner->s.last_time;
     return status3(s);
 }

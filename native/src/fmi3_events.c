@@ -1,12 +1,13 @@
-/* The FMI 3.0 Model Exchange functions and the sample clock of Scheduled Execution (see
- * fmi3_glue.c): calls of the instance core's Model Exchange side (instance_me.c). A clock tick is an event of
- * the model's Model Exchange side at the tick's time: the samples due are taken. */
+/* The FMI 3.0 Model Exchange functions and the sample clock of Scheduled Execution and of
+ * Co-Simulation with event mode (see fmi3_glue.c, fmi3_cosim.c): calls of the instance core's
+ * Model Exchange side (instance_me.c). A clock tick is an event of the model's Model Exchange
+ * side at the tick's time: the samples due are taken. */
 #include <math.h>
 #include <stddef.h>
 
 #include "fmi3_wrapper.h"
 
-/* --- clocks (Scheduled Execution) ------------------------------------------------------------- */
+/* --- clocks (Scheduled Execution; Co-Simulation with event mode) ------------------------------ */
 
 /* The clock's value reference is VR_CLOCK: 1 if every reference is it, else 0 after logging. */
 static int clocks_only(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, const void *out,
@@ -27,6 +28,38 @@ static int clocks_only(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, co
         return 0;
     }
     return 1;
+}
+
+/* The sample clock in Co-Simulation with event mode (Wrapper.tick_active): active in Event Mode
+ * at a tick. fmi3GetClock tells it (the standard's getter is for output clocks; this input clock
+ * answers too); fmi3SetClock may confirm it, never move it (its ticks are fixed). */
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Clock values[])
+{
+    WRAP(fmi3GetClock);
+    if (!clocks_only(w, valueReferences, nValueReferences, values, "fmi3GetClock")) {
+        return fmi3Error;
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        values[k] = w->state == ST_EVENT && w->tick_active;
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Clock values[])
+{
+    WRAP(fmi3SetClock);
+    if (!clocks_only(w, valueReferences, nValueReferences, values, "fmi3SetClock")) {
+        return fmi3Error;
+    }
+    for (size_t k = 0; k < nValueReferences; k++) {
+        if (values[k] && !(w->state == ST_EVENT && w->tick_active)) {
+            return FAIL(w, "fmi3SetClock: the sample clock ticks every sample_period from the "
+                           "start time only, in Event Mode of co-simulation with event mode");
+        }
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,

@@ -8,8 +8,9 @@
  * results, and the sample clock of Scheduled Execution (fmi3ActivateModelPartition at a tick = an
  * event of the model's Model Exchange side at that time: the samples due are taken, outputs
  * updated). Co-Simulation (fmi3_cosim.c) samples inside doStep as under FMI 2.0, so a host
- * without clock support runs it unchanged; a model with discrete-state switches (the plant)
- * offers early return, the intermediate update and event mode at each switch.
+ * without clock support runs it unchanged; with eventModeUsed the clock's ticks are events (early
+ * return, the sample in Event Mode); a model with discrete-state switches (the plant) offers
+ * early return, the intermediate update and event mode at each switch.
  */
 #include <math.h>
 #include <stddef.h>
@@ -42,6 +43,11 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
 #if HAS_EARLY_RETURN
     if (w->early_return && w->inner == inst) {
         return model_step_early(d, t, h, &w->reached, &w->work, msg);
+    }
+#endif
+#if HAS_CLOCK
+    if (w->clock_events && w->inner == inst) {
+        return model_step_to_tick(d, t, h, w->early_allowed, &w->reached, msg);
     }
 #endif
     w->reached = t + h;
@@ -179,7 +185,7 @@ fmi3Instance fmi3InstantiateCoSimulation(
     const char *refused = required_outputs(requiredIntermediateVariables,
                                            nRequiredIntermediateVariables);
     (void)resourcePath;
-    if (!HAS_EARLY_RETURN && eventModeUsed) {
+    if (!HAS_EARLY_RETURN && !HAS_CLOCK && eventModeUsed) {
         refused = MODEL_IDENTIFIER_STR " has no event mode in co-simulation (hasEventMode=false)";
     }
     if (refused) {
@@ -191,8 +197,9 @@ fmi3Instance fmi3InstantiateCoSimulation(
     w = instantiate(K_CS, instanceName, instantiationToken, visible, loggingOn,
                     instanceEnvironment, logMessage);
     if (w) { /* the plant stops its step at each switch for early return or the callback */
-        w->early_allowed = HAS_EARLY_RETURN && earlyReturnAllowed;
+        w->early_allowed = (HAS_EARLY_RETURN || HAS_CLOCK) && earlyReturnAllowed;
         w->event_mode_used = eventModeUsed != fmi3False;
+        w->clock_events = HAS_CLOCK && w->event_mode_used; /* the controller: ticks are events */
         w->update = HAS_EARLY_RETURN ? intermediateUpdate : NULL;
         w->early_return = w->early_allowed || w->update != NULL;
     }
@@ -257,6 +264,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
                    : w->kind == K_SE ? ST_CLOCK_ACTIVATION
                    : w->event_mode_used ? ST_EVENT
                                         : ST_STEP;
+        w->tick_active = w->clock_events; /* tick 0, sampled in Initialization Mode */
     }
     return s;
 }

@@ -98,7 +98,7 @@ typedef enum {
 #define MASK_fmi3GetNumberOfEventIndicators ST_ANY
 #define MASK_fmi3GetNumberOfContinuousStates ST_ANY
 
-/* clocks (Scheduled Execution) */
+/* clocks (Scheduled Execution; Get/SetClock also in Co-Simulation with event mode) */
 #define MASK_fmi3GetIntervalDecimal ST_READ
 #define MASK_fmi3GetShiftDecimal ST_ANY
 #define MASK_fmi3GetIntervalFraction ST_ANY

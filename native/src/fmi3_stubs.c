@@ -48,25 +48,6 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     return nValueReferences ? FAIL(w, "fmi3SetBinary: this FMU has no Binary variables") : fmi3OK;
 }
 
-/* The sample clock is activated by fmi3ActivateModelPartition only (Scheduled Execution). */
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Clock values[])
-{
-    WRAP(fmi3GetClock);
-    (void)valueReferences, (void)values;
-    return nValueReferences ? FAIL(w, "fmi3GetClock: this FMU has no output clocks") : fmi3OK;
-}
-
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Clock values[])
-{
-    WRAP(fmi3SetClock);
-    (void)valueReferences, (void)values;
-    return nValueReferences ? FAIL(w, "fmi3SetClock: clocks are activated with "
-                                      "fmi3ActivateModelPartition (Scheduled Execution)")
-                            : fmi3OK;
-}
-
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
                                                fmi3ValueReference valueReference,
                                                size_t *nDependencies)

@@ -30,6 +30,8 @@ typedef struct {
     int early_allowed;  /* the importer's earlyReturnAllowed */
     int event_mode_used; /* the importer's eventModeUsed */
     fmi3IntermediateUpdateCallback update; /* the importer's, or NULL */
+    int clock_events; /* co-simulation with eventModeUsed of a model with the sample clock */
+    int tick_active;  /* clock_events: the sample clock ticks at the current event */
 } Wrapper;
 
 /* An fmi2Status as fmi3Status (the same numbers; fmi2Pending, never returned, as fmi3Error). */
@@ -61,6 +63,12 @@ fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeed
                                      fmi3Boolean *valuesOfContinuousStatesChanged,
                                      fmi3Boolean *nextEventTimeDefined,
                                      fmi3Float64 *nextEventTime);
+
+#if HAS_CLOCK
+/* the controller's model_me.c: the next sample's time; the step stopping at a tick if early */
+double model_next_tick(const Data *d);
+int model_step_to_tick(Data *d, double t, double h, int early, double *reached, char *msg);
+#endif
 
 #define FAIL(w, ...) (log_message((w)->inner, fmi2Error, "logStatusError", __VA_ARGS__), fmi3Error)
 

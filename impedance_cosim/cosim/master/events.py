@@ -29,10 +29,14 @@ MAX_EVENTS_PER_STEP = 100  # a hang guard: contact chattering inside one communi
 
 
 def has_event_mode(description: Any) -> bool:
-    """True for an FMI 3.0 Co-Simulation FMU that offers event mode (hasEventMode="true")."""
+    """True for an FMI 3.0 Co-Simulation FMU that offers event mode (hasEventMode="true") for
+    its own events. One with an input clock (the controller's sample clock) is stepped without
+    event mode: its ticks would need the master to set its inputs at each tick, which it does
+    not; it samples inside its steps then, as on the fixed grid."""
     cs = getattr(description, "coSimulation", None)
     version = str(getattr(description, "fmiVersion", ""))
-    return version.startswith("3") and cs is not None and bool(cs.hasEventMode)
+    clocks = [v for v in getattr(description, "modelVariables", ()) if v.type == "Clock"]
+    return version.startswith("3") and cs is not None and bool(cs.hasEventMode) and not clocks
 
 
 class EventInstance(FmuInstance3):

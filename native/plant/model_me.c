@@ -54,16 +54,25 @@ void model_me_set_states(Data *d, const double x[])
     }
 }
 
+/* The states y and their derivatives dy at d's states and torques (c: the plant's context). */
+static int derivatives(const Data *d, PlantCtx *c, double y[ODE_N], double dy[ODE_N], char *msg)
+{
+    char err[ODE_MSG_MAX];
+    plant_read_ctx(d, c);
+    model_me_get_states(d, y);
+    if (plant_rhs(c, y, dy, err)) {
+        return fail(msg, "plant derivatives failed: %s", err);
+    }
+    return 0;
+}
+
 int model_me_evaluate(Data *d, char *msg)
 {
     ModelState *m = &d->m;
     PlantCtx c;
     double y[ODE_N], dy[ODE_N];
-    char err[ODE_MSG_MAX];
-    plant_read_ctx(d, &c);
-    model_me_get_states(d, y);
-    if (plant_rhs(&c, y, dy, err)) {
-        return fail(msg, "plant derivatives failed: %s", err);
+    if (derivatives(d, &c, y, dy, msg)) {
+        return 1;
     }
     for (int k = 0; k < N_STATES; k++) {
         d->r[DERIVATIVE_VRS[k]] = dy[k];
@@ -96,10 +105,8 @@ static int switching_function_ahead(const Data *d, double *g, char *msg)
     PlantCtx c;
     double y[ODE_N], dy[ODE_N];
     char err[ODE_MSG_MAX];
-    plant_read_ctx(d, &c);
-    model_me_get_states(d, y);
-    if (plant_rhs(&c, y, dy, err)) {
-        return fail(msg, "plant derivatives failed: %s", err);
+    if (derivatives(d, &c, y, dy, msg)) {
+        return 1;
     }
     for (int k = 0; k < ODE_N; k++) {
         y[k] += LOOKAHEAD * dy[k];

@@ -24,7 +24,7 @@ def wrap_angle(a: float) -> float:
     return w + TWO_PI if w <= -math.pi else w
 
 
-def impedance_terms(
+def impedance_law(
     arm: Arm,
     q: Vec3,
     yhat: Vec3,
@@ -78,25 +78,10 @@ def impedance_terms(
 def gravity_hold_terms(arm: Arm, q: Vec3, yhat: Vec3, xv: Vec3) -> tuple[Vec3, Vec3, Vec3]:
     """What the controller outputs where eq. (10) is undefined (a singular J, only ever at
     initialization): gravity compensation tau = g(q) alone, with the tracking error and J yhat,
-    which are defined at every pose (same order of operations as impedance_terms)."""
+    which are defined at every pose (same order of operations as impedance_law)."""
     terms = arm.terms
     j = terms.jacobian(q)
     pose = terms.kinematics(q)
     e = (pose[0] - xv[0], pose[1] - xv[1], wrap_angle(pose[2] - xv[2]))
     return terms.gravity(q), e, matvec(j, yhat)
 
-
-def impedance_law(
-    arm: Arm,
-    q: Vec3,
-    yhat: Vec3,
-    f_au: Vec3,
-    xv: Vec3,
-    xv_dot: Vec3,
-    xv_ddot: Vec3,
-    G: Vec3,
-    B: Vec3,
-) -> Vec3:
-    """tau = J^T F_e, eq. (10), from the measured angles, the velocity estimate yhat and the
-    measured wrist force F_au; G, B are the diagonals of the stiffness and damping."""
-    return impedance_terms(arm, q, yhat, f_au, xv, xv_dot, xv_ddot, G, B)[0]

@@ -34,10 +34,9 @@ velocity_source only selects which joint-velocity estimate feeds the impedance l
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Any
 
-from controller_model.impedance_law import SingularPoseError, gravity_hold_terms, impedance_terms
+from controller_model.impedance_law import SingularPoseError, gravity_hold_terms, impedance_law
 from controller_model.observer import observer_update
 from controller_model.parameters import (
     VELOCITY_SOURCE,
@@ -52,6 +51,7 @@ from impedance_cosim.fmi.model import (
     build_params,
     check_finite_inputs,
     check_finite_outputs,
+    check_step,
 )
 from impedance_cosim.fmi.variables import (
     SAMPLED_INPUTS,
@@ -216,7 +216,7 @@ class ControllerModel(FmuModel):
         qd_hat = yhat if source == "observer" else qd_diff if source == "difference" else qd_meas
         xv, xv_dot, xv_ddot = virtual_trajectory(self.traj, self.start_time + k * ts)
         if law:
-            tau, e, xd_hat = impedance_terms(
+            tau, e, xd_hat = impedance_law(
                 self.arm, q, qd_hat, f, xv, xv_dot, xv_ddot, self.G, self.B
             )
         else:
@@ -235,12 +235,7 @@ class ControllerModel(FmuModel):
 
     def do_step(self, t: float, h: float, inputs: tuple) -> None:
         q, f, qd_meas = self._split(inputs)
-        if not h > 0.0:
-            raise ModelError(f"communication step must be > 0 (got {h})")
-        if h == math.inf:
-            raise ModelError("communication step must be finite (got inf)")
-        if abs(t - self.t) > 1e-9 * max(1.0, abs(t)):
-            raise ModelError(f"doStep at t={t}, but the controller is at t={self.t}")
+        check_step(t, h, self.t, "controller")
         ts = self.ctrl.sample_period
         tol = TIME_TOL * ts
         t_end = t + h

@@ -22,6 +22,7 @@ from impedance_cosim.fmi.model import (
     build_params,
     check_finite_inputs,
     check_finite_outputs,
+    check_step,
 )
 from impedance_cosim.fmi.variables import (
     ModelExchange,
@@ -276,12 +277,7 @@ class PlantModel(FmuModel):
 
     def do_step(self, t: float, h: float, inputs: tuple) -> None:
         check_finite_inputs(INPUTS, inputs)
-        if not h > 0.0:
-            raise ModelError(f"communication step must be > 0 (got {h})")
-        if h == math.inf:
-            raise ModelError("communication step must be finite (got inf)")
-        if abs(t - self.t) > 1e-9 * max(1.0, abs(t)):
-            raise ModelError(f"doStep at t={t}, but the plant is at t={self.t}")
+        check_step(t, h, self.t, "plant")
         t_end = t + h
         y = (*self.q, *self.qd)
         t_cur, mode, hh, switches = t, self.in_contact, self.h, 0

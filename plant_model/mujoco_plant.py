@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from impedance_cosim.fmi.model import FmuModel, ModelError, check_finite_inputs
+from impedance_cosim.fmi.model import FmuModel, ModelError, check_finite_inputs, check_step
 from impedance_cosim.fmi.variables import Variable
 from impedance_cosim.physics.description import RobotDescription, describe
 from impedance_cosim.physics.wall import WallParams
@@ -153,10 +153,7 @@ class MujocoPlantModel(PlantModel):
 
     def do_step(self, t: float, h: float, inputs: tuple) -> None:
         check_finite_inputs(INPUTS, inputs)
-        if not h > 0.0 or h == math.inf:
-            raise ModelError(f"communication step must be finite and > 0 (got {h})")
-        if abs(t - self.t) > 1e-9 * max(1.0, abs(t)):
-            raise ModelError(f"doStep at t={t}, but the plant is at t={self.t}")
+        check_step(t, h, self.t, "plant")
         mujoco, m, d = self._mujoco, self.mj, self.mj_data
         n = max(1, math.ceil(h / self.timestep * (1.0 - 1e-12)))
         if n > MAX_SUBSTEPS:

@@ -136,8 +136,13 @@ def test_law_on_the_trajectory_is_the_computed_torque_feed_forward():
         f_au = RNG.uniform(-20, 20, 3)
         qdd = np.linalg.solve(j, xv_ddot - jdot @ qd)
         ref = h @ qdd + c @ qd + f @ qd + g + j.T @ f_au
-        tau = impedance_law(ARM, q, qd, tuple(f_au), xv, tuple(xv_dot), tuple(xv_ddot), G, B)
+        tau = torque(ARM, q, qd, tuple(f_au), xv, tuple(xv_dot), tuple(xv_ddot), G, B)
         assert np.allclose(tau, ref, rtol=1e-10, atol=1e-9)
+
+
+def torque(*args):
+    """The joint torque of eq. (10) alone (impedance_law also returns e and J yhat)."""
+    return impedance_law(*args)[0]
 
 
 def cartesian_law(arm, q, yhat, f_au, xv, xv_dot, xv_ddot, Gd, Bd):
@@ -169,7 +174,7 @@ def test_joint_space_law_equals_cartesian_form():
         xv_dot, xv_ddot = RNG.uniform(-1, 1, 3), RNG.uniform(-3, 3, 3)
         f_au = RNG.uniform(-20, 20, 3)
         gains, damp = tuple(RNG.uniform(100, 2000, 3)), tuple(RNG.uniform(10, 100, 3))
-        tau = impedance_law(
+        tau = torque(
             ARM, q, yhat, tuple(f_au), tuple(xv), tuple(xv_dot), tuple(xv_ddot), gains, damp
         )
         ref = cartesian_law(ARM, q, np.array(yhat), f_au, xv, xv_dot, xv_ddot, gains, damp)
@@ -181,9 +186,9 @@ def test_law_uses_the_controllers_own_model():
     q, qd = STATES[0]
     args = (q, qd, (0.0, 0.0, 0.0), ARM.kinematics(q), (0.1, 0.2, 0.0), (0.5, 0.1, 0.0), G, B)
     other = Arm(ArmParams(m2=7.0))
-    assert not np.allclose(impedance_law(ARM, *args), impedance_law(other, *args))
+    assert not np.allclose(torque(ARM, *args), torque(other, *args))
     ref = cartesian_law(other, q, np.array(qd), np.zeros(3), *map(np.array, args[3:6]), G, B)
-    assert np.allclose(impedance_law(other, *args), ref, rtol=1e-9)
+    assert np.allclose(torque(other, *args), ref, rtol=1e-9)
 
 
 def test_law_term_signs():
@@ -196,7 +201,7 @@ def test_law_term_signs():
         x = ARM.kinematics(q)
 
         def f_e(xv=x, yhat=ZERO, f_au=ZERO, q=q, j=j):
-            tau = impedance_law(ARM, q, yhat, f_au, xv, ZERO, (0.2, -0.1, 0.3), gains, damp)
+            tau = torque(ARM, q, yhat, f_au, xv, ZERO, (0.2, -0.1, 0.3), gains, damp)
             return np.linalg.solve(j.T, tau)
 
         base = f_e()
@@ -219,7 +224,7 @@ def test_wrap_angle():
 @pytest.mark.parametrize("q2", [0.0, math.pi, -math.pi, 1e-8])
 def test_law_refuses_a_singular_jacobian(q2):
     with pytest.raises(ModelError, match="singular"):
-        impedance_law(ARM, (0.3, q2, 0.2), ZERO, ZERO, (0.5, 0.0, 0.0), ZERO, ZERO, G, B)
+        torque(ARM, (0.3, q2, 0.2), ZERO, ZERO, (0.5, 0.0, 0.0), ZERO, ZERO, G, B)
 
 
 # --- observer, eq. (9) ------------------------------------------------------------------------
@@ -341,7 +346,7 @@ def test_first_output_reflects_the_inputs_at_initialization():
     u = inputs_at(0.3)
     m = ControllerModel({"yhat0_2": 0.1}, 0.3, u)
     xv, xvd, xvdd = virtual_trajectory(TRAJ, 0.3)
-    tau = impedance_law(ARM, u[:3], (0.0, 0.1, 0.0), u[3:6], xv, xvd, xvdd, G, B)
+    tau = torque(ARM, u[:3], (0.0, 0.1, 0.0), u[3:6], xv, xvd, xvdd, G, B)
     out = m.outputs()
     assert out[:3] == tau
     assert out[3:12] == (0.0, 0.1, 0.0) * 3  # qd_hat, qd_obs, qd_diff all start at yhat0

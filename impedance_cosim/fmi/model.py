@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from typing import Any, ClassVar, TypeVar
 
 from impedance_cosim.fmi.variables import Variable
@@ -71,6 +72,17 @@ def build_params(cls: type[P], values: dict[str, Any]) -> P:
     """Instantiate a parameter dataclass from the matching entries of a name -> value dict."""
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     return cls(**{k: v for k, v in values.items() if k in names})
+
+
+def check_step(t: float, h: float, model_t: float, who: str) -> None:
+    """Raise ModelError unless a step of h from t is one the model can take: h finite and > 0,
+    and t the model's own time (within 1e-9 relative)."""
+    if not h > 0.0:
+        raise ModelError(f"communication step must be > 0 (got {h})")
+    if h == math.inf:
+        raise ModelError("communication step must be finite (got inf)")
+    if abs(t - model_t) > 1e-9 * max(1.0, abs(t)):
+        raise ModelError(f"doStep at t={t}, but the {who} is at t={model_t}")
 
 
 def check_finite_inputs(names: tuple[str, ...], values: tuple) -> None:

@@ -102,7 +102,9 @@ def test_the_generators_on_one_small_term():
     expr = sp.Matrix([[a1 * m1 * sp.cos(q1) + a1 * m1], [a1 * m1 * sp.sin(q1)]])
     decl, body = derivation.c_function(ccode, "demo", ["q"], expr, "a demo")
     assert decl[1] == "void arm_demo(const ArmParams *p, const double q[3], double *out);"
-    assert "    const double a1 = p->a1;" in body and "    (void)qd;" not in body
+    # parameters and angles read in place, the printed order of operations kept
+    assert "    const double x0 = p->a1*p->m1;" in body and "    (void)qd;" not in body
+    assert "    out[0] = x0*(cos(q[0]) + 1);" in body
     assert any(line.startswith("    out[1] = ") for line in body)
     hoister = bind_source._Hoister({"a1", "m1"}, [])
     temps = [("x0", "a1 * m1"), ("x1", "x0 * cos(q1)")]

@@ -4,184 +4,103 @@
 
 void arm_kinematics(const ArmParams *p, const double q[3], double *out)
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double a3 = p->a3;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
-    const double x0 = q1 + q2;
-    const double x1 = q3 + x0;
-    out[0] = a1*cos(q1) + a2*cos(x0) + a3*cos(x1);
-    out[1] = a1*sin(q1) + a2*sin(x0) + a3*sin(x1);
+    const double x0 = q[0] + q[1];
+    const double x1 = q[2] + x0;
+    out[0] = p->a1*cos(q[0]) + p->a2*cos(x0) + p->a3*cos(x1);
+    out[1] = p->a1*sin(q[0]) + p->a2*sin(x0) + p->a3*sin(x1);
     out[2] = x1;
 }
 
 void arm_jacobian(const ArmParams *p, const double q[3], double *out)
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double a3 = p->a3;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
-    const double x0 = q1 + q2;
-    const double x1 = q3 + x0;
-    const double x2 = a3*sin(x1);
-    const double x3 = a2*sin(x0) + x2;
-    const double x4 = a3*cos(x1);
-    const double x5 = a2*cos(x0) + x4;
-    out[0] = -a1*sin(q1) - x3;
-    out[1] = -x3;
-    out[2] = -x2;
-    out[3] = a1*cos(q1) + x5;
-    out[4] = x5;
-    out[5] = x4;
-    out[6] = 1;
-    out[7] = 1;
-    out[8] = 1;
+    const double x0 = q[0] + q[1];
+    const double x1 = q[2] + x0;
+    const double x2 = p->a3*sin(x1);
+    const double x3 = p->a2*sin(x0) + x2;
+    const double x4 = p->a3*cos(x1);
+    const double x5 = p->a2*cos(x0) + x4;
+    out[0] = -p->a1*sin(q[0]) - x3; out[1] = -x3; out[2] = -x2;
+    out[3] = p->a1*cos(q[0]) + x5; out[4] = x5; out[5] = x4;
+    out[6] = 1; out[7] = 1; out[8] = 1;
 }
 
 void arm_jacobian_dot(const ArmParams *p, const double q[3], const double qd[3], double *out)
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double a3 = p->a3;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
-    const double qd1 = qd[0], qd2 = qd[1], qd3 = qd[2];
-    const double x0 = a1*qd1;
-    const double x1 = q1 + q2;
-    const double x2 = a2*cos(x1);
-    const double x3 = q3 + x1;
-    const double x4 = a3*cos(x3);
-    const double x5 = qd1*x2 + qd1*x4 + qd2*x2 + qd2*x4 + qd3*x4;
-    const double x6 = qd1 + qd2 + qd3;
-    const double x7 = a2*sin(x1);
-    const double x8 = a3*sin(x3);
-    const double x9 = qd1*x7 + qd1*x8 + qd2*x7 + qd2*x8 + qd3*x8;
-    out[0] = -x0*cos(q1) - x5;
-    out[1] = -x5;
-    out[2] = -x4*x6;
-    out[3] = -x0*sin(q1) - x9;
-    out[4] = -x9;
-    out[5] = -x6*x8;
-    out[6] = 0;
-    out[7] = 0;
-    out[8] = 0;
+    const double x0 = p->a1*qd[0];
+    const double x1 = q[0] + q[1];
+    const double x2 = p->a2*cos(x1);
+    const double x3 = q[2] + x1;
+    const double x4 = p->a3*cos(x3);
+    const double x5 = qd[0]*x2 + qd[0]*x4 + qd[1]*x2 + qd[1]*x4 + qd[2]*x4;
+    const double x6 = qd[0] + qd[1] + qd[2];
+    const double x7 = p->a2*sin(x1);
+    const double x8 = p->a3*sin(x3);
+    const double x9 = qd[0]*x7 + qd[0]*x8 + qd[1]*x7 + qd[1]*x8 + qd[2]*x8;
+    out[0] = -x0*cos(q[0]) - x5; out[1] = -x5; out[2] = -x4*x6;
+    out[3] = -x0*sin(q[0]) - x9; out[4] = -x9; out[5] = -x6*x8;
+    out[6] = 0; out[7] = 0; out[8] = 0;
 }
 
 void arm_inertia(const ArmParams *p, const double q[3], double *out)
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double m1 = p->m1;
-    const double m2 = p->m2;
-    const double m3 = p->m3;
-    const double rx1 = p->rx1;
-    const double ry1 = p->ry1;
-    const double rx2 = p->rx2;
-    const double rx3 = p->rx3;
-    const double Iu1 = p->Iu1;
-    const double Iu2 = p->Iu2;
-    const double Iu3 = p->Iu3;
-    const double Im1 = p->Im1;
-    const double Im2 = p->Im2;
-    const double Im3 = p->Im3;
-    const double q2 = q[1], q3 = q[2];
-    const double x0 = pow(a1, 2);
-    const double x1 = a1*cos(q2);
-    const double x2 = a2*m3;
+    const double x0 = pow(p->a1, 2);
+    const double x1 = p->a1*cos(q[1]);
+    const double x2 = p->a2*p->m3;
     const double x3 = x1*x2;
-    const double x4 = m2*rx2*x1;
-    const double x5 = a1*m3*rx3*cos(q2 + q3);
-    const double x6 = rx3*x2*cos(q3);
-    const double x7 = Iu3 + m3*pow(rx3, 2);
-    const double x8 = Iu2 + pow(a2, 2)*m3 + m2*pow(rx2, 2) + 2*x6 + x7;
+    const double x4 = p->m2*p->rx2*x1;
+    const double x5 = p->a1*p->m3*p->rx3*cos(q[1] + q[2]);
+    const double x6 = p->rx3*x2*cos(q[2]);
+    const double x7 = p->Iu3 + p->m3*pow(p->rx3, 2);
+    const double x8 = p->Iu2 + pow(p->a2, 2)*p->m3 + p->m2*pow(p->rx2, 2) + 2*x6 + x7;
     const double x9 = x3 + x4 + x5 + x8;
     const double x10 = x6 + x7;
     const double x11 = x10 + x5;
-    out[0] = Im1 + Iu1 + m1*pow(rx1, 2) + m1*pow(ry1, 2) + m2*x0 + m3*x0 + 2*x3 + 2*x4 + 2*x5 + x8;
+    out[0] = p->Im1 + p->Iu1 + p->m1*pow(p->rx1, 2) + p->m1*pow(p->ry1, 2) + p->m2*x0 + p->m3*x0 + 2*x3 + 2*x4 + 2*x5 + x8;
     out[1] = x9;
     out[2] = x11;
-    out[3] = x9;
-    out[4] = Im2 + x8;
-    out[5] = x10;
-    out[6] = x11;
-    out[7] = x10;
-    out[8] = Im3 + x7;
+    out[3] = x9; out[4] = p->Im2 + x8; out[5] = x10;
+    out[6] = x11; out[7] = x10; out[8] = p->Im3 + x7;
 }
 
 void arm_coriolis(const ArmParams *p, const double q[3], const double qd[3], double *out)
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double m2 = p->m2;
-    const double m3 = p->m3;
-    const double rx2 = p->rx2;
-    const double rx3 = p->rx3;
-    const double q2 = q[1], q3 = q[2];
-    const double qd1 = qd[0], qd2 = qd[1], qd3 = qd[2];
-    const double x0 = a2*sin(q3);
-    const double x1 = sin(q2 + q3);
-    const double x2 = a1*x1 + x0;
-    const double x3 = m3*rx3;
+    const double x0 = p->a2*sin(q[2]);
+    const double x1 = sin(q[1] + q[2]);
+    const double x2 = p->a1*x1 + x0;
+    const double x3 = p->m3*p->rx3;
     const double x4 = x2*x3;
-    const double x5 = sin(q2);
-    const double x6 = a1*(a2*m3*x5 + m2*rx2*x5 + x1*x3);
-    const double x7 = qd2*x6 + qd3*x4;
-    const double x8 = qd1*x6;
-    const double x9 = qd1 + qd2;
-    const double x10 = qd3 + x9;
+    const double x5 = sin(q[1]);
+    const double x6 = p->a1*(p->a2*p->m3*x5 + p->m2*p->rx2*x5 + x1*x3);
+    const double x7 = qd[1]*x6 + qd[2]*x4;
+    const double x8 = qd[0]*x6;
+    const double x9 = qd[0] + qd[1];
+    const double x10 = qd[2] + x9;
     const double x11 = x0*x3;
-    const double x12 = -qd3*x11;
-    out[0] = -x7;
-    out[1] = -x7 - x8;
-    out[2] = -x10*x4;
-    out[3] = x12 + x8;
-    out[4] = x12;
-    out[5] = -x10*x11;
-    out[6] = x3*(qd1*x2 + qd2*x0);
-    out[7] = x11*x9;
-    out[8] = 0;
+    const double x12 = -qd[2]*x11;
+    out[0] = -x7; out[1] = -x7 - x8; out[2] = -x10*x4;
+    out[3] = x12 + x8; out[4] = x12; out[5] = -x10*x11;
+    out[6] = x3*(qd[0]*x2 + qd[1]*x0); out[7] = x11*x9; out[8] = 0;
 }
 
 void arm_gravity(const ArmParams *p, const double q[3], double *out)
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double m1 = p->m1;
-    const double m2 = p->m2;
-    const double m3 = p->m3;
-    const double rx1 = p->rx1;
-    const double ry1 = p->ry1;
-    const double rx2 = p->rx2;
-    const double rx3 = p->rx3;
-    const double g = p->g;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
-    const double x0 = cos(q1);
-    const double x1 = a1*x0;
-    const double x2 = q1 + q2;
+    const double x0 = cos(q[0]);
+    const double x1 = p->a1*x0;
+    const double x2 = q[0] + q[1];
     const double x3 = cos(x2);
-    const double x4 = rx2*x3;
-    const double x5 = rx3*cos(q3 + x2);
-    const double x6 = a2*x3 + x5;
-    out[0] = g*(m1*(rx1*x0 - ry1*sin(q1)) + m2*(x1 + x4) + m3*(x1 + x6));
-    out[1] = g*(m2*x4 + m3*x6);
-    out[2] = g*m3*x5;
+    const double x4 = p->rx2*x3;
+    const double x5 = p->rx3*cos(q[2] + x2);
+    const double x6 = p->a2*x3 + x5;
+    out[0] = p->g*(p->m1*(p->rx1*x0 - p->ry1*sin(q[0])) + p->m2*(x1 + x4) + p->m3*(x1 + x6));
+    out[1] = p->g*(p->m2*x4 + p->m3*x6);
+    out[2] = p->g*p->m3*x5;
 }
 
 double arm_potential_energy(const ArmParams *p, const double q[3])
 {
-    const double a1 = p->a1;
-    const double a2 = p->a2;
-    const double m1 = p->m1;
-    const double m2 = p->m2;
-    const double m3 = p->m3;
-    const double rx1 = p->rx1;
-    const double ry1 = p->ry1;
-    const double rx2 = p->rx2;
-    const double rx3 = p->rx3;
-    const double g = p->g;
-    const double q1 = q[0], q2 = q[1], q3 = q[2];
-    const double x0 = sin(q1);
-    const double x1 = a1*x0;
-    const double x2 = q1 + q2;
+    const double x0 = sin(q[0]);
+    const double x1 = p->a1*x0;
+    const double x2 = q[0] + q[1];
     const double x3 = sin(x2);
-    return g*(m1*(rx1*x0 + ry1*cos(q1)) + m2*(rx2*x3 + x1) + m3*(a2*x3 + rx3*sin(q3 + x2) + x1));
+    return p->g*(p->m1*(p->rx1*x0 + p->ry1*cos(q[0])) + p->m2*(p->rx2*x3 + x1) + p->m3*(p->a2*x3 + p->rx3*sin(q[2] + x2) + x1));
 }

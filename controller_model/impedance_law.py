@@ -84,4 +84,3 @@ def gravity_hold_terms(arm: Arm, q: Vec3, yhat: Vec3, xv: Vec3) -> tuple[Vec3, V
     pose = terms.kinematics(q)
     e = (pose[0] - xv[0], pose[1] - xv[1], wrap_angle(pose[2] - xv[2]))
     return terms.gravity(q), e, matvec(j, yhat)
-

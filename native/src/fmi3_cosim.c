@@ -60,11 +60,19 @@ State3 state_of_core(const Wrapper *w)
 }
 
 #if HAS_CLOCK
-/* 1 if a sample is due at the instance's current time (not taken yet) */
-static int cs_tick_due(const Wrapper *w)
+int tick_due(const Wrapper *w)
 {
     const Data *d = &w->inner->s.d;
     return model_next_tick(d) <= w->inner->s.last_time + 1e-9 * d->r[CLOCK_PERIOD_VR];
+}
+
+/* Where a restored FMU state is in Event Mode: a sample due, or tick 0 (sampled in
+ * Initialization Mode, active in the Event Mode after it) still at the start time. */
+int tick_pending(const Wrapper *w)
+{
+    const Data *d = &w->inner->s.d;
+    return tick_due(w) || (d->m.k_next == 1 && w->inner->s.last_time <=
+                                                   d->m.start_time + 1e-9 * d->r[CLOCK_PERIOD_VR]);
 }
 
 /* The sample due at the current time (model_me_event_update, as under Model Exchange). */
@@ -88,7 +96,7 @@ fmi3Status cs_enter_event_mode(Wrapper *w)
     }
     w->state = ST_EVENT;
 #if HAS_CLOCK
-    w->tick_active = w->clock_events && cs_tick_due(w);
+    w->tick_active = w->clock_events && tick_due(w);
 #endif
     return fmi3OK;
 }
@@ -198,7 +206,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     }
 #if HAS_CLOCK
     if (s == fmi2OK && w->clock_events) { /* at a tick: inside the step (early) or at its end */
-        w->tick_active = cs_tick_due(w);
+        w->tick_active = tick_due(w);
         *eventHandlingNeeded = w->tick_active ? fmi3True : fmi3False;
     }
 #endif

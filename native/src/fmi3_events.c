@@ -1,7 +1,7 @@
-/* The FMI 3.0 Model Exchange functions and the sample clock of Scheduled Execution and of
- * Co-Simulation with event mode (see fmi3_glue.c, fmi3_cosim.c): calls of the instance core's
- * Model Exchange side (instance_me.c). A clock tick is an event of the model's Model Exchange
- * side at the tick's time: the samples due are taken. */
+/* The FMI 3.0 Model Exchange functions and the sample clock of Scheduled Execution, of Model
+ * Exchange and of Co-Simulation with event mode (see fmi3_glue.c, fmi3_cosim.c): calls of the
+ * instance core's Model Exchange side (instance_me.c). A clock tick is an event of the model's
+ * Model Exchange side at the tick's time: the samples due are taken. */
 #include <math.h>
 #include <stddef.h>
 
@@ -30,9 +30,12 @@ static int clocks_only(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, co
     return 1;
 }
 
-/* The sample clock in Co-Simulation with event mode (Wrapper.tick_active): active in Event Mode
- * at a tick. fmi3GetClock tells it (the standard's getter is for output clocks; this input clock
- * answers too); fmi3SetClock may confirm it, never move it (its ticks are fixed). */
+/* The sample clock in Model Exchange and in Co-Simulation with event mode (Wrapper.tick_active):
+ * active in Event Mode at a tick until fmi3UpdateDiscreteStates, which takes its sample and
+ * deactivates it (FMI 3.0: the FMU deactivates every clock active during that call).
+ * fmi3GetClock tells it (the standard's getter is for output clocks; this input clock answers
+ * too); fmi3SetClock, the importer's activation, may confirm it, never move it (its ticks are
+ * fixed). */
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Clock values[])
 {
@@ -56,7 +59,8 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueRef
     for (size_t k = 0; k < nValueReferences; k++) {
         if (values[k] && !(w->state == ST_EVENT && w->tick_active)) {
             return FAIL(w, "fmi3SetClock: the sample clock ticks every sample_period from the "
-                           "start time only, in Event Mode of co-simulation with event mode");
+                           "start time only: in Event Mode at a tick (Model Exchange, "
+                           "co-simulation with event mode), before fmi3UpdateDiscreteStates");
         }
     }
     return fmi3OK;
@@ -183,6 +187,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     fmi2EventInfo ev;
     fmi2Status s;
     WRAP(fmi3UpdateDiscreteStates);
+    w->tick_active = 0; /* the sample due is taken below */
     if (w->kind == K_CS) {
         return cs_update_discrete_states(w, discreteStatesNeedUpdate, terminateSimulation,
                                          nominalsOfContinuousStatesChanged,
@@ -222,6 +227,7 @@ fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
     s = status3(instance_enter_continuous_time_mode(w->inner));
     if (s <= fmi3Warning) {
         w->state = ST_CONTINUOUS_TIME;
+        w->tick_active = 0;
     }
     return s;
 }

@@ -150,9 +150,14 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
+    Wrapper *w;
     (void)resourcePath;
-    return instantiate(K_ME, instanceName, instantiationToken, visible, loggingOn,
-                       instanceEnvironment, logMessage);
+    w = instantiate(K_ME, instanceName, instantiationToken, visible, loggingOn,
+                    instanceEnvironment, logMessage);
+    if (w) {
+        w->clock_events = HAS_CLOCK; /* clocked Model Exchange: the ticks are time events */
+    }
+    return w;
 }
 
 /* NULL if the importer's requiredIntermediateVariables are all outputs of a model with
@@ -279,6 +284,9 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
     s = status3(instance_enter_event_mode(w->inner));
     if (s <= fmi3Warning) {
         w->state = ST_EVENT;
+#if HAS_CLOCK
+        w->tick_active = w->clock_events && tick_due(w); /* a time event at a tick */
+#endif
     }
     return s;
 }
@@ -316,6 +324,9 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
     s = status3(instance_set_state(w->inner, FMUState));
     if (s <= fmi3Warning) {
         w->state = state_of_core(w);
+#if HAS_CLOCK
+        w->tick_active = w->clock_events && w->state == ST_EVENT && tick_pending(w);
+#endif
     }
     return s;
 }

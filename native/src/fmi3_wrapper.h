@@ -30,8 +30,10 @@ typedef struct {
     int early_allowed;  /* the importer's earlyReturnAllowed */
     int event_mode_used; /* the importer's eventModeUsed */
     fmi3IntermediateUpdateCallback update; /* the importer's, or NULL */
-    int clock_events; /* co-simulation with eventModeUsed of a model with the sample clock */
-    int tick_active;  /* clock_events: the sample clock ticks at the current event */
+    int clock_events; /* a model with the sample clock, in Model Exchange or in co-simulation
+                         with eventModeUsed: its ticks are events */
+    int tick_active;  /* clock_events: the sample clock is active (Event Mode at a tick, until
+                         fmi3UpdateDiscreteStates) */
 } Wrapper;
 
 /* An fmi2Status as fmi3Status (the same numbers; fmi2Pending, never returned, as fmi3Error). */
@@ -68,6 +70,10 @@ fmi3Status cs_update_discrete_states(Wrapper *w, fmi3Boolean *discreteStatesNeed
 /* the controller's model_me.c: the next sample's time; the step stopping at a tick if early */
 double model_next_tick(const Data *d);
 int model_step_to_tick(Data *d, double t, double h, int early, double *reached, char *msg);
+/* fmi3_cosim.c: 1 if a sample is due at the instance's current time (not taken yet) */
+int tick_due(const Wrapper *w);
+/* fmi3_cosim.c: the clock's activation in a restored Event Mode (fmi3SetFMUState) */
+int tick_pending(const Wrapper *w);
 #endif
 
 #define FAIL(w, ...) (log_message((w)->inner, fmi2Error, "logStatusError", __VA_ARGS__), fmi3Error)

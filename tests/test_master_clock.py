@@ -50,13 +50,14 @@ def test_clocked_controller_at_1_400_equals_the_fmi2_run_bit_for_bit(
 
 def test_ticks_inside_a_step_are_taken_at_their_time(fmu_dir, fmi3_dir, monkeypatch):
     """At 1/1000 s steps the master cuts the steps at the ticks inside them (k/400 s for odd
-    k, 0.5 ms into a step; the others are on its end), where plant and controller both are; the controller never returns early (no
-    tick is inside a step it takes). Every tick once, within 1e-9 sample periods of k/400 s
-    (measured 8.9e-14: the end of a step the master computed as t + h). The plant integrates
-    other steps (1 ms and the cuts) than at 1/400 s, so the rows at common times (every 5 ms)
-    are not bit for bit: measured over 2 s, torques within 4.6e-11 and the plant's outputs
-    within 2.6e-9 (plant.phid) of each signal's range. Bound 1e-8. (Jacobi is not compared:
-    its delay is one communication step, 1 ms here, 2.5 ms at 1/400 s: another loop.)"""
+    k, 0.5 ms into a step; the others are on its end), where plant and controller both are;
+    the controller never returns early (no tick is inside a step it takes). Every tick once,
+    within 1e-9 sample periods of k/400 s (measured 8.9e-14: the end of a step the master
+    computed as t + h). The plant integrates over other steps (1 ms and the cuts) than at
+    1/400 s, so the rows at common times (every 5 ms) are not bit for bit: measured over 2 s,
+    torques within 4.6e-11 and the plant's outputs within 2.6e-9 (plant.phid) of each
+    signal's range. Bound 1e-8. (Jacobi is not compared: its delay is one communication step,
+    1 ms here, 2.5 ms at 1/400 s: another loop.)"""
     early = []
     step = ClockedEventInstance.step
 
@@ -78,3 +79,20 @@ def test_ticks_inside_a_step_are_taken_at_their_time(fmu_dir, fmi3_dir, monkeypa
     scale = np.max(np.abs(b[:, 1:]), axis=0)
     scale[scale == 0.0] = 1.0
     assert np.max(np.abs(a[:, 1:] - b[:, 1:]) / scale) <= 1e-8
+
+
+def test_an_early_return_the_master_did_not_plan_stops_the_run(fmu_dir, fmi3_dir, monkeypatch):
+    """earlyReturnAllowed is what keeps a tick inside a step from being sampled on stale inputs:
+    a master that did not cut the step there (here: told of no next tick) gets the FMU's early
+    return at the tick, and the run fails naming it instead of going on."""
+    take = ClockedEventInstance.take_tick
+
+    def forgetting(self):
+        take(self)
+        self.next_tick = np.inf
+
+    monkeypatch.setattr(ClockedEventInstance, "take_tick", forgetting)
+    options = RunOptions(parameter_set="observer", stop_time=0.01, step_size=1 / 1000)
+    result = EventExactMaster(read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"), options).run()
+    assert result.status == "failed" and len(result.data) == 3  # t = 0, 1, 2 ms
+    assert "controller: the step from t=0.002 to 0.003 ended at t=0.0025" in result.error

@@ -75,6 +75,7 @@ def test_run_cli_event_exact_writes_the_fixed_step_rows(fmu_dir, fmi3_dir, tmp_p
     assert csvs[0] == csvs[1] and len(csvs[0]) > 1000
     (switch,) = summary["events"]["plant"]  # the contact closes once before 4 s
     assert 3.8 < switch < 3.9 and f"plant events (event-exact): {switch:.9f} s" in done.stdout
+    assert "controller clock ticks (event-exact): 1601, 0.000000000 to 4.000000000 s" in done.stdout
 
 
 def test_run_cli_event_exact_without_an_event_mode_fmu_is_refused(native_ssp, tmp_path):

@@ -13,11 +13,12 @@ An FMU with event mode and an input clock (the controller's sample clock, issue 
 instantiated so too; its ticks are its events. The master cuts each communication step at the
 next tick the FMU announced (nextEventTime), so every component reaches the tick; the FMU signals
 eventHandlingNeeded there and takes the tick when the step from it starts, in Event Mode
-(fmi3SetClock, fmi3UpdateDiscreteStates) on the inputs the algorithm gives it there: Gauss-Seidel
-the other components' outputs at the tick, Jacobi the same (their inputs are the outputs before
-its sample: the one-sample delay stays). A row at a tick holds the output before the tick, as in
-the fixed-step run; the tick at the stop time is taken after the last row. At a step of one
-sample period the rows equal the fixed-step run's bit for bit.
+(fmi3SetClock, fmi3UpdateDiscreteStates) on the inputs the algorithm gives it there: under
+Gauss-Seidel and Jacobi alike the other components' outputs at the tick (under Jacobi their
+inputs over the step from the tick are its outputs before the tick: the delay of one step
+stays). A row at a tick holds the outputs before the tick, as in the fixed-step run; the tick at
+the stop time is taken after the last row. At a step of one sample period the rows equal the
+fixed-step run's bit for bit.
 """
 
 from __future__ import annotations
@@ -121,6 +122,7 @@ class ClockedEventInstance(EventInstance):
             self.ticks: list[float] = []
             self.pending: float | None = None
             self.next_tick = math.inf
+            self._event_mode = False
         return super()._call(method, *args, **kwargs)
 
     def exit_initialization(self) -> None:
@@ -157,7 +159,8 @@ class ClockedEventInstance(EventInstance):
 
 class _Opener:
     """The master's instance source (its `instances` hook): EventInstance for each FMU with event
-    mode, the usual instance otherwise; each freed after the run."""
+    mode (ClockedEventInstance with an input clock), the usual instance otherwise; each freed
+    after the run."""
 
     def __init__(self) -> None:
         self.opened: dict[str, FmuInstance] = {}
@@ -181,7 +184,7 @@ class _Opener:
 class EventExactMaster(Master):
     """Master (same arguments, Python loop) stepping the FMUs with event mode event-exactly;
     after run(), events (and the result's info["events"]) maps each such component to its
-    event times."""
+    event times, ticks (info["ticks"]) each one with an input clock to its ticks."""
 
     def __init__(self, system: SystemDescription, options: RunOptions | None = None) -> None:
         options = options or RunOptions()

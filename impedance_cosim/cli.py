@@ -100,9 +100,10 @@ def add_run(sub) -> None:
     p.add_argument(
         "--event-exact",
         action="store_true",
-        help="step each FMI 3.0 FMU with event mode (the plant) to its events inside the"
-        " communication steps (contact switches, handled in Event Mode); the rows stay on the"
-        " communication grid",
+        help="step each FMI 3.0 FMU with event mode to its events inside the communication"
+        " steps, handled in Event Mode: the plant's contact switches, the controller's clock"
+        " ticks (each step cut at the tick, sampled on the plant's outputs there); the rows stay"
+        " on the communication grid",
     )
     p.set_defaults(func=run_cmd.cmd_run)
 

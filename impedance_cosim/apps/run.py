@@ -276,6 +276,9 @@ def _scenarios_and_figures(args, system, overrides: dict, out: Path, run, runs: 
         values["events"] = main.info["events"]
         for name, times in main.info["events"].items():
             print(f"{name} events (event-exact): " + ", ".join(f"{t:.9f} s" for t in times))
+    for name, ticks in main.info.get("ticks", {}).items():  # --event-exact, an input clock
+        span = f", {ticks[0]:.9f} to {ticks[-1]:.9f} s" if ticks else ""
+        print(f"{name} clock ticks (event-exact): {len(ticks)}{span}")
     written.append(out / f"{main.parameter_set}_summary.json")
     with atomic_write(written[-1]) as f:
         f.write(json.dumps(values, indent=2) + "\n")

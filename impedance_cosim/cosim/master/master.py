@@ -282,30 +282,11 @@ class Master:
     def _python_steps(self, ordered, data, names, first: int, count: int):
         """Steps first .. first + count - 1 in Python; returns (rows filled, error or None)."""
         h, t0 = self.step_size, self.start_time
-        jacobi = self.algorithm == "jacobi"
-        extrapolate = self.options.extrapolation != "none"
         step_times, zero_start = self.options.step_times, self.options.zero_start_inputs
         for i in range(first, first + count):
             t, h_i = step_times(i) if step_times else (t0 + i * h, h)
             try:
-                if jacobi:
-                    zero = zero_start and i == 0
-                    for s in ordered:
-                        if extrapolate:
-                            s.write(extra.inputs(s, ordered, h_i))
-                        else:
-                            s.write([0.0 if zero else ordered[j].values[k] for j, k in s.sources])
-                    for s in ordered:
-                        s.fmu.step(t, h_i)
-                    for s in ordered:
-                        s.values = s.read()
-                    if extrapolate:
-                        extra.refresh(ordered)
-                else:
-                    for s in ordered:
-                        s.write([ordered[j].values[k] for j, k in s.sources])
-                        s.fmu.step(t, h_i)
-                        s.values = s.read()
+                self._step_all(ordered, t, h_i, zero_start and i == 0)
             except FmuError as exc:
                 return i - first, str(exc)
             t_next = t0 + (i + 1) * h
@@ -314,6 +295,31 @@ class Master:
             if error:
                 return i + 1 - first, error
         return count, None
+
+    def _step_all(self, ordered: list[_Slot], t: float, h: float, zero: bool = False) -> None:
+        """Every component from t to t + h, its inputs set as the algorithm says (Gauss-Seidel:
+        each just before its step, Jacobi: all before the steps); each slot's values updated."""
+        if self.algorithm != "jacobi":
+            for s in ordered:
+                s.write(self._inputs(s, ordered, h))
+                s.fmu.step(t, h)
+                s.values = s.read()
+            return
+        for s in ordered:
+            s.write(self._inputs(s, ordered, h, zero))
+        for s in ordered:
+            s.fmu.step(t, h)
+        for s in ordered:
+            s.values = s.read()
+        if self.options.extrapolation != "none":
+            extra.refresh(ordered)
+
+    def _inputs(self, s: _Slot, ordered: list[_Slot], h: float, zero: bool = False) -> list[float]:
+        """The values of s's connected inputs for a step of h: its sources' latest outputs, 0.0
+        (zero: Jacobi's zero_start_inputs) or extrapolated over h (Jacobi's extrapolation)."""
+        if self.options.extrapolation != "none":
+            return extra.inputs(s, ordered, h)
+        return [0.0 if zero else ordered[j].values[k] for j, k in s.sources]
 
     def _initialize(self, ordered: list[_Slot]) -> None:
         for s in ordered:

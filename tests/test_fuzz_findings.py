@@ -104,15 +104,25 @@ def test_python_controller_refuses_a_step_whose_outputs_overflow():
 def test_native_controller_refuses_a_step_whose_outputs_overflow(native_dir: Path):
     """The same through the native FMI 2.0 controller: fmi2Discard, the same message in the log,
     and the outputs of the step's start kept."""
-    from fmpy import extract, instantiate_fmu, read_model_description
+    from fmpy import extract, read_model_description
     from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.fmi2 import defaultCallbacks as default  # noqa: N813
 
     path = native_dir / "ImpedanceController.fmu"
     md = read_model_description(path)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     outputs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
     messages: list[str] = []
-    fmu = instantiate_fmu(extract(path), md, logger=lambda *a: messages.append(a[-1].decode()))
+    # Our own callbacks, not the logger argument of fmpy's instantiate_fmu: see the last test.
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(lambda *a: messages.append(a[-1].decode()))
+    callbacks.allocateMemory, callbacks.freeMemory = default.allocateMemory, default.freeMemory
+    identifier = md.coSimulation.modelIdentifier
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)),
+                    modelIdentifier=identifier, instanceName="controller")  # fmt: skip
+    fmu.instantiate(callbacks=callbacks)
+    fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
     angles = [vr[n] for n in ("q1", "q2", "q3")]
@@ -126,3 +136,15 @@ def test_native_controller_refuses_a_step_whose_outputs_overflow(native_dir: Pat
     assert fmu.getReal(outputs) == before
     fmu.terminate()
     fmu.freeInstance()
+
+
+def test_no_test_hands_fmpy_a_logger_it_keeps_process_wide():
+    """The logger argument of fmpy's instantiate_fmu and simulate_fmu sets the one logger of
+    fmpy's native logging proxy (process-wide) to a callback that is freed with the FMU; the next
+    FMU that logs through fmpy's default callbacks then calls freed memory (it crashed an xdist
+    worker in test_closedloop's refused ME instantiation). Tests pass their own callbacks."""
+    import re
+
+    call = re.compile(r"(instantiate_fmu|simulate_fmu)\((?:[^()]|\([^()]*\))*\blogger=")
+    found = [p.name for p in Path(__file__).parent.glob("*.py") if call.search(p.read_text())]
+    assert found == []

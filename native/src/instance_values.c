@@ -76,149 +76,108 @@ static void mark_dirty(Instance *inst)
     }
 }
 
-fmi2Status instance_get_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       fmi2Real value[])
+/* The four getters differ only in their type and in how a stored value is read. */
+#define GETTER(function, ctype, var_type, stored)                                                 \
+    fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,             \
+                        ctype value[])                                                          \
+    {                                                                                           \
+        Instance *inst = (Instance *)c;                                                         \
+        fmi2Status status = check_access(inst, vr, nvr, value, var_type, 0);                    \
+        for (size_t k = 0; status == fmi2OK && k < nvr; k++) {                                  \
+            value[k] = stored;                                                                  \
+        }                                                                                       \
+        return status;                                                                          \
+    }
+
+GETTER(instance_get_real, fmi2Real, T_REAL, inst->s.d.r[vr[k]])
+GETTER(instance_get_integer, fmi2Integer, T_INTEGER, inst->s.d.i[vr[k]])
+GETTER(instance_get_boolean, fmi2Boolean, T_BOOLEAN, inst->s.d.i[vr[k]] ? fmi2True : fmi2False)
+GETTER(instance_get_string, fmi2String, T_STRING, inst->s.d.s[vr[k]])
+
+/* value[k] of a setter's array, of the given type, written into d (the instance's or a copy). */
+static void store(Data *d, fmi2ValueReference vr, const void *value, VarType type, size_t k)
 {
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_REAL, 0);
-    if (status != fmi2OK) {
-        return status;
+    switch (type) {
+    case T_REAL:
+        d->r[vr] = ((const fmi2Real *)value)[k];
+        break;
+    case T_INTEGER:
+        d->i[vr] = ((const fmi2Integer *)value)[k];
+        break;
+    case T_BOOLEAN:
+        d->i[vr] = ((const fmi2Boolean *)value)[k] ? 1 : 0;
+        break;
+    case T_STRING:
+        memset(d->s[vr], 0, STRING_MAX);
+        strcpy(d->s[vr], ((const fmi2String *)value)[k]);
+        break;
     }
-    for (size_t k = 0; k < nvr; k++) {
-        value[k] = inst->s.d.r[vr[k]];
-    }
-    return fmi2OK;
 }
 
-fmi2Status instance_get_integer(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Integer value[])
+/* A setter's values, all checked before anything changes: strings present and short enough,
+ * inputs finite, parameters that pass check_parameter and, after initialization (tunable ones),
+ * the model's own check of the new values together. */
+static fmi2Status check_values(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
+                               const void *value, VarType type)
 {
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_INTEGER, 0);
-    if (status != fmi2OK) {
-        return status;
-    }
     for (size_t k = 0; k < nvr; k++) {
-        value[k] = inst->s.d.i[vr[k]];
-    }
-    return fmi2OK;
-}
-
-fmi2Status instance_get_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Boolean value[])
-{
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_BOOLEAN, 0);
-    if (status != fmi2OK) {
-        return status;
-    }
-    for (size_t k = 0; k < nvr; k++) {
-        value[k] = inst->s.d.i[vr[k]] ? fmi2True : fmi2False;
-    }
-    return fmi2OK;
-}
-
-fmi2Status instance_get_string(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         fmi2String value[])
-{
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_STRING, 0);
-    if (status != fmi2OK) {
-        return status;
-    }
-    for (size_t k = 0; k < nvr; k++) {
-        value[k] = inst->s.d.s[vr[k]];
-    }
-    return fmi2OK;
-}
-
-fmi2Status instance_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       const fmi2Real value[])
-{
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_REAL, 1);
-    if (status != fmi2OK) {
-        return status;
-    }
-    for (size_t k = 0; k < nvr; k++) { /* check all before changing anything */
         const VarInfo *v = &VARS[vr[k]];
-        if (v->causality == C_INPUT && !isfinite(value[k])) {
-            return ERROR(inst, "input %s is not finite (%g)", v->name, value[k]);
+        if (type == T_STRING) {
+            const char *text = ((const fmi2String *)value)[k];
+            if (!text || strlen(text) >= STRING_MAX) {
+                return ERROR(inst, "string value for %s is NULL or longer than %d characters",
+                             v->name, STRING_MAX - 1);
+            }
+            continue;
         }
-        if (v->causality == C_PARAMETER && check_parameter((int)vr[k], value[k], inst->msg)) {
+        double x = type == T_REAL      ? ((const fmi2Real *)value)[k]
+                   : type == T_INTEGER ? ((const fmi2Integer *)value)[k]
+                                       : ((const fmi2Boolean *)value)[k] != fmi2False;
+        if (v->causality == C_INPUT && !isfinite(x)) {
+            return ERROR(inst, "input %s is not finite (%g)", v->name, x);
+        }
+        if (v->causality == C_PARAMETER && check_parameter((int)vr[k], x, inst->msg)) {
             return ERROR(inst, "%s", inst->msg);
         }
     }
     if (inst->s.phase > S_INITIALIZATION && sets_parameter(vr, nvr)) {
-        Data tmp = inst->s.d; /* tunable parameters: the model checks the new values */
+        Data tmp = inst->s.d;
         for (size_t k = 0; k < nvr; k++) {
-            tmp.r[vr[k]] = value[k];
+            store(&tmp, vr[k], value, type, k);
         }
         if (model_check_tunable(&tmp, inst->msg)) {
             return ERROR(inst, "%s", inst->msg);
         }
     }
+    return fmi2OK;
+}
+
+static fmi2Status set_values(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                             const void *value, VarType type)
+{
+    Instance *inst = (Instance *)c;
+    fmi2Status status = check_access(inst, vr, nvr, value, type, 1);
+    if (status == fmi2OK) {
+        status = check_values(inst, vr, nvr, value, type);
+    }
+    if (status != fmi2OK) {
+        return status;
+    }
     for (size_t k = 0; k < nvr; k++) {
-        inst->s.d.r[vr[k]] = value[k];
+        store(&inst->s.d, vr[k], value, type, k);
     }
     mark_dirty(inst);
     return fmi2OK;
 }
 
-fmi2Status instance_set_integer(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Integer value[])
-{
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_INTEGER, 1);
-    if (status != fmi2OK) {
-        return status;
+#define SETTER(function, ctype, var_type)                                                        \
+    fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,             \
+                        const ctype value[])                                                    \
+    {                                                                                           \
+        return set_values(c, vr, nvr, value, var_type);                                         \
     }
-    for (size_t k = 0; k < nvr; k++) {
-        if (VARS[vr[k]].causality == C_PARAMETER &&
-            check_parameter((int)vr[k], value[k], inst->msg)) {
-            return ERROR(inst, "%s", inst->msg);
-        }
-    }
-    for (size_t k = 0; k < nvr; k++) {
-        inst->s.d.i[vr[k]] = value[k];
-    }
-    mark_dirty(inst);
-    return fmi2OK;
-}
 
-fmi2Status instance_set_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Boolean value[])
-{
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_BOOLEAN, 1);
-    if (status != fmi2OK) {
-        return status;
-    }
-    for (size_t k = 0; k < nvr; k++) {
-        inst->s.d.i[vr[k]] = value[k] ? 1 : 0;
-    }
-    mark_dirty(inst);
-    return fmi2OK;
-}
-
-fmi2Status instance_set_string(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         const fmi2String value[])
-{
-    Instance *inst = (Instance *)c;
-    fmi2Status status = check_access(inst, vr, nvr, value, T_STRING, 1);
-    if (status != fmi2OK) {
-        return status;
-    }
-    for (size_t k = 0; k < nvr; k++) {
-        if (!value[k] || strlen(value[k]) >= STRING_MAX) {
-            return ERROR(inst, "string value for %s is NULL or longer than %d characters",
-                         VARS[vr[k]].name, STRING_MAX - 1);
-        }
-    }
-    for (size_t k = 0; k < nvr; k++) {
-        memset(inst->s.d.s[vr[k]], 0, STRING_MAX);
-        strcpy(inst->s.d.s[vr[k]], value[k]);
-    }
-    mark_dirty(inst);
-    return fmi2OK;
-}
+SETTER(instance_set_real, fmi2Real, T_REAL)
+SETTER(instance_set_integer, fmi2Integer, T_INTEGER)
+SETTER(instance_set_boolean, fmi2Boolean, T_BOOLEAN)
+SETTER(instance_set_string, fmi2String, T_STRING)

@@ -70,10 +70,10 @@ def _plain_run(fmi3_dir, torques) -> list[float]:
     return plain.get(STATE)
 
 
-def test_the_plant_declares_the_features_and_the_controller_does_not(fmi3_dir):
-    """The intermediate update is the plant's; the controller's event mode is its clock's
-    (tests/test_fmi3_clock_cs.py)."""
-    for name, offered in (("PumaPlant", "true"), ("ImpedanceController", "false")):
+def test_the_plant_declares_the_features(fmi3_dir):
+    """The plant's intermediate update and event mode are at its contact; the controller's at
+    its clock's ticks (tests/test_fmi3_clock_cs.py, test_fmi3_clock_update.py)."""
+    for name, offered in (("PumaPlant", "true"), ("ImpedanceController", "true")):
         md = read_model_description(str(fmi3_dir / f"{name}.fmu"))
         cs = md.coSimulation
         assert str(cs.hasEventMode).lower() == "true", name
@@ -84,8 +84,6 @@ def test_the_plant_declares_the_features_and_the_controller_does_not(fmi3_dir):
         flags = {v.get("intermediateUpdate", "false") for v in root.find("ModelVariables")
                  if v.get("causality") == "output"}  # fmt: skip
         assert flags == {offered}, name
-    with pytest.raises(Exception, match="instantiate"):  # no intermediate variables
-        Plant(fmi3_dir, "ImpedanceController", required=("tau1",), eventModeUsed=True)
     log: list[str] = []
     md = read_model_description(str(fmi3_dir / "PumaPlant.fmu"))
     fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(fmi3_dir / "PumaPlant.fmu")),

@@ -82,9 +82,10 @@ def model_description3(
     early_return: fmi3DoStep may return early at the plant's contact, calls the intermediate
     update there and signals the event (event mode in Co-Simulation) if the importer asks;
     naming: the variableNamingConvention, as in the FMI 2.0 writer; cs_clock: the sample clock
-    of Co-Simulation with event mode (hasEventMode, early return at its ticks), its variables
-    not clocked: the same FMU serves importers without event mode and Model Exchange, which set
-    the inputs and read the outputs outside the clock's ticks (clocked, they could not)."""
+    of Co-Simulation with event mode (hasEventMode, early return and intermediate update at its
+    ticks), its variables not clocked: the same FMU serves importers without event mode and Model
+    Exchange, which set the inputs and read the outputs outside the clock's ticks (clocked, they
+    could not)."""
     table = full_table(variables, model_exchange)
     ext = extras(len(table), model_exchange, clock or cs_clock)
     vr_of = {v.name: vr for vr, v in enumerate(table)}
@@ -122,7 +123,7 @@ def model_description3(
         },
     )
     for vr, v in enumerate(table):
-        _variable3(mv, vr, v, vr_of, ext.clock if clock else None, early_return)
+        _variable3(mv, vr, v, vr_of, ext.clock if clock else None, early_return or bool(cs_clock))
     _extra_variables3(mv, ext, clock or cs_clock)
     _model_structure3(root, table, vr_of, ext, output_dependencies, model_exchange, clock, partials)
     ET.indent(root)
@@ -138,8 +139,8 @@ def _interfaces3(
     cs_clock: SampleClock | None = None,
 ) -> Partials | None:
     """ScheduledExecution (with a clock), else ModelExchange (when given) and CoSimulation (with
-    cs_clock: event mode, early return at its ticks); the model's Partials, if any (they add the
-    directional and output derivatives)."""
+    cs_clock: event mode, early return and intermediate update at its ticks); the model's
+    Partials, if any (they add the directional and output derivatives)."""
     common = {
         "modelIdentifier": model_name,
         "needsExecutionTool": "false",
@@ -166,12 +167,17 @@ def _interfaces3(
             {
                 **common,
                 "canHandleVariableCommunicationStepSize": "true",
-                # the plant's contact switch: early return, intermediate update, event mode;
-                # the controller's clock ticks: early return, event mode
-                "hasEventMode": xml_value(early_return or cs_clock is not None),
-                "mightReturnEarlyFromDoStep": xml_value(early_return or cs_clock is not None),
-                "providesIntermediateUpdate": xml_value(early_return),
-                "canReturnEarlyAfterIntermediateUpdate": xml_value(early_return),
+                # the plant's contact switch and the controller's clock ticks: early return,
+                # intermediate update, event mode
+                **dict.fromkeys(
+                    (
+                        "hasEventMode",
+                        "mightReturnEarlyFromDoStep",
+                        "providesIntermediateUpdate",
+                        "canReturnEarlyAfterIntermediateUpdate",
+                    ),
+                    xml_value(early_return or cs_clock is not None),
+                ),
                 **orders,
             },
         )

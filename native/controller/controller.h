@@ -30,8 +30,8 @@ int controller_split_inputs(const Data *d, double q[3], double f[3], double qd_m
 int controller_take_sample(Data *d, const Params *p, int64_t k, const double q[3],
                            const double f[3], const double qd_meas[3], int law, char *msg);
 /* model_me.c, for FMI 3.0 Co-Simulation with event mode: the next sample's time, and the step
- * that stops at a tick (fmi3_wrapper.h declares both for the glue) */
+ * that stops at a tick (fmi3_wrapper.h declares both for the glue; model_me.h the TICK_* flags) */
 double model_next_tick(const Data *d);
-int model_step_to_tick(Data *d, double t, double h, int early, double *reached, char *msg);
+int model_step_to_tick(Data *d, double t, double h, int stop, double *reached, char *msg);
 
 #endif

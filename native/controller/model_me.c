@@ -90,32 +90,49 @@ int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg)
 
 /* --- Co-Simulation with event mode (FMI 3.0: the sample clock's ticks are events) ------------ */
 
-double model_next_tick(const Data *d)
+static double tick_time(const Data *d, int64_t k)
 {
-    return d->m.start_time + (double)d->m.k_next * d->r[VR_sample_period];
+    return d->m.start_time + (double)k * d->r[VR_sample_period];
 }
 
-/* The step from t: up to the first tick inside it where early is set (*reached: where it
- * stopped), else to t + h sampling inside as model_step does; a tick at the step's end is left
- * for Event Mode. A sample due at t was left to Event Mode and not taken there: refused. */
-int model_step_to_tick(Data *d, double t, double h, int early, double *reached, char *msg)
+double model_next_tick(const Data *d)
 {
-    const double tick = model_next_tick(d);
+    return tick_time(d, d->m.k_next);
+}
+
+/* The step from t (stop: TICK_*, model_me.h): up to the first tick inside it where stop asks
+ * (*reached: where it stopped), else to t + h sampling inside as model_step does; a tick at the
+ * step's end is left for Event Mode. TICK_RESUME: the tick at t was offered to the intermediate
+ * update and not taken as an event, so it is sampled here, inside the step (on the inputs of its
+ * start, counted as held, as model_step counts it); else a sample due at t was left to Event
+ * Mode and not taken there: refused. TICK_UPDATE bounds the whole step by max_samples_per_step
+ * as model_step does (the callback may let every tick pass). */
+int model_step_to_tick(Data *d, double t, double h, int stop, double *reached, char *msg)
+{
     const double tol = TIME_TOL * d->r[VR_sample_period];
-    if (tick <= t + tol) {
-        char buf[32];
-        py_float_repr(tick, buf, sizeof buf);
+    const int n_max = d->i[VR_max_samples_per_step];
+    const int resume = (stop & TICK_RESUME) && model_next_tick(d) <= t + tol;
+    const double tick = tick_time(d, d->m.k_next + resume);
+    char buf[32];
+    if (!resume && model_next_tick(d) <= t + tol) {
+        py_float_repr(model_next_tick(d), buf, sizeof buf);
         return fail(msg, "the sample due at t=%s was not taken: fmi3EnterEventMode and "
                          "fmi3UpdateDiscreteStates first (eventHandlingNeeded)", buf);
     }
-    if (!early || !(tick < t + h - tol)) {
-        *reached = t + h;
-        return model_step(d, t, h, msg);
+    if ((stop & TICK_UPDATE) && tick_time(d, d->m.k_next + n_max) < t + h - tol) {
+        py_float_repr(h, buf, sizeof buf);
+        return fail(msg, "a communication step of %s s would take more than %d samples "
+                         "(parameter max_samples_per_step): take a smaller step", buf, n_max);
     }
-    if (model_step(d, t, tick - t, msg)) { /* no sample: the tick is the step's end */
+    if (!(stop & (TICK_EARLY | TICK_UPDATE)) || !(tick < t + h - tol)) {
+        *reached = t + h;
+    } else {
+        *reached = tick; /* no sample at the tick: it is this model step's end */
+    }
+    if (model_step(d, t, *reached - t, msg)) {
         return 1;
     }
-    d->m.t = tick;
-    *reached = tick;
+    d->m.held_input_samples += resume;
+    d->m.t = *reached;
     return 0;
 }

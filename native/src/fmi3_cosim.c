@@ -12,7 +12,10 @@
  * The controller (HAS_CLOCK) with eventModeUsed: its sample clock's ticks are the events. The
  * step stops at a tick inside it where early return is allowed (else it samples inside as
  * without event mode: the standard leaves events inside a step without early return to the FMU),
- * a tick at its end signals eventHandlingNeeded; fmi3UpdateDiscreteStates takes the sample. */
+ * a tick at its end signals eventHandlingNeeded; fmi3UpdateDiscreteStates takes the sample. With
+ * an intermediate update callback the step stops at each tick inside it for the callback (the
+ * outputs held up to the tick readable) and ends there only on its request; a tick it lets pass
+ * is sampled inside the step (TICK_RESUME), as without early return. */
 #include <string.h>
 
 #include "fmi3_wrapper.h"
@@ -140,8 +143,8 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance)
     return fmi3OK;
 }
 
-/* At a switch at time t inside the step: the importer's intermediate update. 1 if it requests
- * the early return (honoured only where the importer allowed early return). */
+/* At a switch or tick at time t inside the step: the importer's intermediate update. 1 if it
+ * requests the early return (honoured only where the importer allowed early return). */
 static int intermediate_update(Wrapper *w, double t)
 {
     fmi3Boolean requested = fmi3False;
@@ -154,6 +157,18 @@ static int intermediate_update(Wrapper *w, double t)
               &requested, &when);
     w->state = ST_STEP;
     return w->early_allowed && requested;
+}
+
+/* 1 if the step ends at the switch or tick at t (early return): where the importer allowed
+ * early return, the plant ends it without a callback, with event mode, or on request; the
+ * controller without a callback or on request (else the tick is sampled inside the step, on
+ * the inputs of its start, as without early return). */
+static int ends_step(Wrapper *w, double t)
+{
+    if (intermediate_update(w, t)) {
+        return 1;
+    }
+    return w->early_allowed && (!w->update || (w->event_mode_used && !w->clock_events));
 }
 
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
@@ -182,6 +197,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         s = instance_do_step(w->inner, t, t_end - t,
                              noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False,
                              model_step_fmi3);
+        w->tick_passed = 0;
         if (s != fmi2OK && t > currentCommunicationPoint) {
             w->inner->s.d.m = backup_m;
             memcpy(w->inner->s.d.r, backup_r, sizeof backup_r);
@@ -190,11 +206,10 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         if (s != fmi2OK || !(w->reached < t_end)) {
             break;
         }
-        /* stopped at a discrete-state switch (the plant's wall contact) */
+        /* stopped at a discrete-state switch (the plant's wall contact) or a tick */
         t = w->reached;
         w->inner->s.last_time = t;
-        if (intermediate_update(w, t) || (w->early_allowed && (!w->update ||
-                                                                w->event_mode_used))) {
+        if (ends_step(w, t)) {
             *earlyReturn = fmi3True;
             *eventHandlingNeeded = w->event_mode_used ? fmi3True : fmi3False;
             log_message(w->inner, fmi2OK, "logAll", "fmi3DoStep returns early at t=%.17g%s", t,
@@ -203,8 +218,13 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                                             : " (event: the contact switched)");
             break;
         }
+        w->tick_passed = w->clock_events;
     }
 #if HAS_CLOCK
+    if (s == fmi2OK && w->clock_events && !*earlyReturn) { /* the step's end as one model step */
+        w->inner->s.last_time = t_end;                    /* computes it, past passed ticks too */
+        w->inner->s.d.m.t = t_end;
+    }
     if (s == fmi2OK && w->clock_events) { /* at a tick: inside the step (early) or at its end */
         w->tick_active = tick_due(w);
         *eventHandlingNeeded = w->tick_active ? fmi3True : fmi3False;

@@ -47,7 +47,9 @@ int model_step_fmi3(Data *d, double t, double h, char *msg)
 #endif
 #if HAS_CLOCK
     if (w->clock_events && w->inner == inst) {
-        return model_step_to_tick(d, t, h, w->early_allowed, &w->reached, msg);
+        const int stop = w->update ? TICK_UPDATE : w->early_allowed ? TICK_EARLY : 0;
+        return model_step_to_tick(d, t, h, stop | (w->tick_passed ? TICK_RESUME : 0), &w->reached,
+                                  msg);
     }
 #endif
     w->reached = t + h;
@@ -164,7 +166,7 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
  * intermediate update (the only variables with intermediateUpdate="true"), else why not. */
 static const char *required_outputs(const fmi3ValueReference vr[], size_t n)
 {
-    if (n > 0 && !HAS_EARLY_RETURN) {
+    if (n > 0 && !HAS_EARLY_RETURN && !HAS_CLOCK) {
         return MODEL_IDENTIFIER_STR " provides no intermediate update";
     }
     if (n > 0 && !vr) {
@@ -201,11 +203,12 @@ fmi3Instance fmi3InstantiateCoSimulation(
     }
     w = instantiate(K_CS, instanceName, instantiationToken, visible, loggingOn,
                     instanceEnvironment, logMessage);
-    if (w) { /* the plant stops its step at each switch for early return or the callback */
+    if (w) { /* the plant stops its step at each switch for early return or the callback, the
+              * controller (with event mode) at each tick */
         w->early_allowed = (HAS_EARLY_RETURN || HAS_CLOCK) && earlyReturnAllowed;
         w->event_mode_used = eventModeUsed != fmi3False;
         w->clock_events = HAS_CLOCK && w->event_mode_used; /* the controller: ticks are events */
-        w->update = HAS_EARLY_RETURN ? intermediateUpdate : NULL;
+        w->update = HAS_EARLY_RETURN || HAS_CLOCK ? intermediateUpdate : NULL;
         w->early_return = w->early_allowed || w->update != NULL;
     }
     return w;

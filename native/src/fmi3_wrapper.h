@@ -34,6 +34,8 @@ typedef struct {
                          with eventModeUsed: its ticks are events */
     int tick_active;  /* clock_events: the sample clock is active (Event Mode at a tick, until
                          fmi3UpdateDiscreteStates) */
+    int tick_passed;  /* fmi3DoStep goes on from a tick the intermediate update let pass: the
+                         next model step samples it */
 } Wrapper;
 
 /* An fmi2Status as fmi3Status (the same numbers; fmi2Pending, never returned, as fmi3Error). */

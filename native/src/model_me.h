@@ -32,6 +32,12 @@ int model_me_evaluate(Data *d, char *msg);
 int model_me_event_indicators(const Data *d, double z[], char *msg); /* N_EVENT_INDICATORS */
 /* At an event at time t: update the discrete state, say what changed and the next time event. */
 int model_me_event_update(Data *d, double t, MeEvent *ev, char *msg);
+/* model_step_to_tick of a clocked model (FMI 3.0 Co-Simulation with event mode): stop at the
+ * first tick inside the step for early return, or for the intermediate update (the whole step
+ * then bounded as model_step bounds it); the tick at the step's start sampled inside it */
+#define TICK_EARLY 1
+#define TICK_UPDATE 2
+#define TICK_RESUME 4
 #else
 #define ME_SUPPORTED 0
 #endif

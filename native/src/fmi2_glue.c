@@ -230,9 +230,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2GetRealStatus")) {
-        return fmi2Error;
-    }
+    LEGAL(c, fmi2GetRealStatus);
     if (!value) {
         return ERROR(inst, "fmi2GetRealStatus: value is NULL");
     }
@@ -252,9 +250,7 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2GetBooleanStatus")) {
-        return fmi2Error;
-    }
+    LEGAL(c, fmi2GetBooleanStatus);
     if (!value) {
         return ERROR(inst, "fmi2GetBooleanStatus: value is NULL");
     }

@@ -44,6 +44,8 @@
 
 /* Co-Simulation */
 #define MASK_fmi2DoStep IN2(S_STEP_COMPLETE)
+#define MASK_fmi2GetRealStatus ST2_ANY
+#define MASK_fmi2GetBooleanStatus ST2_ANY
 #define MASK_fmi2GetRealOutputDerivatives IN2(S_STEP_COMPLETE)
 
 /* Model Exchange (fmi2_me.c) */

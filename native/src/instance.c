@@ -203,9 +203,6 @@ fmi2Status instance_set_logging(fmi2Component c, fmi2Boolean loggingOn, size_t n
 {
     (void)nCategories;
     (void)categories;
-    if (!instance_ok((Instance *)c, "fmi2SetDebugLogging")) {
-        return fmi2Error;
-    }
     ((Instance *)c)->logging_on = loggingOn;
     return fmi2OK;
 }
@@ -218,9 +215,6 @@ fmi2Status instance_setup(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Rea
     (void)tolerance;
     (void)stopTimeDefined;
     (void)stopTime;
-    if (!instance_ok(inst, "fmi2SetupExperiment")) {
-        return fmi2Error;
-    }
     if (!isfinite(startTime)) {
         return ERROR(inst, "start time must be finite");
     }
@@ -233,9 +227,6 @@ fmi2Status instance_setup(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Rea
 fmi2Status instance_enter_initialization(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2EnterInitializationMode")) {
-        return fmi2Error;
-    }
     inst->s.phase = S_INITIALIZATION;
     inst->s.dirty = 1;
     return fmi2OK;
@@ -244,9 +235,6 @@ fmi2Status instance_enter_initialization(fmi2Component c)
 fmi2Status instance_exit_initialization(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2ExitInitializationMode")) {
-        return fmi2Error;
-    }
     if (inst->s.dirty && initialize(inst)) {
         return ERROR(inst, "%s", inst->msg);
     }
@@ -257,9 +245,6 @@ fmi2Status instance_exit_initialization(fmi2Component c)
 fmi2Status instance_terminate(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2Terminate")) {
-        return fmi2Error;
-    }
     inst->s.phase = S_TERMINATED;
     return fmi2OK;
 }
@@ -267,9 +252,6 @@ fmi2Status instance_terminate(fmi2Component c)
 fmi2Status instance_reset(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2Reset")) {
-        return fmi2Error;
-    }
     data_start(&inst->s.d, 0.0);
     inst->s.phase = S_INSTANTIATED;
     inst->s.dirty = 1;
@@ -289,9 +271,6 @@ fmi2Status instance_do_step(fmi2Component c, fmi2Real currentCommunicationPoint,
     ModelState backup_m;
     double backup_r[N_VARS];
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!instance_ok(inst, "fmi2DoStep")) {
-        return fmi2Error;
-    }
     if (!isfinite(currentCommunicationPoint)) { /* NaN would pass the model's time check */
         return ERROR_FN(inst, "communication point %g is not finite",
                      currentCommunicationPoint);

@@ -76,8 +76,9 @@ void log_message(Instance *inst, fmi2Status status, const char *category, const 
 void log_fn_error(Instance *inst, const char *fmt, ...);
 #define ERROR_FN(inst, ...) (log_fn_error((inst), __VA_ARGS__), fmi2Error)
 
-/* Every entry point first checks that c is a live instance of this FMU: not NULL, and carrying
- * INSTANCE_MAGIC, which fmi2FreeInstance clears. This catches a second fmi2FreeInstance and most
+/* Every entry point first checks that c is a live instance of this FMU (the FMI 2.0 glue's
+ * LEGAL, the FMI 3.0 glue's WRAP over the wrapper that owns it; the core's functions then trust
+ * it, except instance_free): not NULL, and carrying INSTANCE_MAGIC, which fmi2FreeInstance clears. This catches a second fmi2FreeInstance and most
  * calls on a freed instance, but not all: once the allocator has reused the freed block for a new
  * instance, a stale pointer to it looks valid again (and reading a freed block is itself undefined
  * behaviour that merely happens to work with common allocators). The host's logger cannot be

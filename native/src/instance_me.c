@@ -53,9 +53,6 @@ fmi2Status me_update(Instance *inst)
 static Instance *me_instance(fmi2Component c)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "a Model Exchange function")) {
-        return NULL;
-    }
     if (inst->type != fmi2ModelExchange) {
         log_message(inst, fmi2Error, "logStatusError",
                     "%s is a Model Exchange function, but this instance is for co-simulation",

@@ -142,9 +142,6 @@ fmi2Status instance_get_state(fmi2Component c, fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
     StateBox *box;
-    if (!instance_ok(inst, "fmi2GetFMUstate")) {
-        return fmi2Error;
-    }
     if (!state) {
         return ERROR_FN(inst, "the state pointer is NULL");
     }
@@ -160,9 +157,6 @@ fmi2Status instance_set_state(fmi2Component c, fmi2FMUstate state)
 {
     Instance *inst = (Instance *)c;
     const StateBox *box = (const StateBox *)state;
-    if (!instance_ok(inst, "fmi2SetFMUstate")) {
-        return fmi2Error;
-    }
     if (!box) {
         return ERROR_FN(inst, "the state is NULL");
     }
@@ -180,9 +174,6 @@ fmi2Status instance_free_state(fmi2Component c, fmi2FMUstate *state)
 {
     Instance *inst = (Instance *)c;
     StateBox *box;
-    if (!instance_ok(inst, "fmi2FreeFMUstate")) {
-        return fmi2Error;
-    }
     if (!state || !*state) {
         return fmi2OK; /* FMI 2.0: a NULL state is ignored */
     }
@@ -257,9 +248,6 @@ static void serial_header(SerialHeader *header)
 fmi2Status instance_serialized_size(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     Instance *inst = (Instance *)c;
-    if (!instance_ok(inst, "fmi2SerializedFMUstateSize")) {
-        return fmi2Error;
-    }
     if (!state || !size) {
         return ERROR_FN(inst, "NULL state or size");
     }
@@ -276,9 +264,6 @@ fmi2Status instance_serialize(fmi2Component c, fmi2FMUstate state, fmi2Byte seri
     Instance *inst = (Instance *)c;
     const StateBox *box = (const StateBox *)state;
     SerialHeader header;
-    if (!instance_ok(inst, "fmi2SerializeFMUstate")) {
-        return fmi2Error;
-    }
     if (!state || !serializedState || size < sizeof header + sizeof(Snapshot)) {
         return ERROR_FN(inst, "NULL state or buffer smaller than %lu bytes",
                      (unsigned long)(sizeof header + sizeof(Snapshot)));
@@ -340,9 +325,6 @@ fmi2Status instance_deserialize(fmi2Component c, const fmi2Byte serializedState[
     Instance *inst = (Instance *)c;
     Snapshot body;
     StateBox *box;
-    if (!instance_ok(inst, "fmi2DeSerializeFMUstate")) {
-        return fmi2Error;
-    }
     if (!state) {
         return ERROR_FN(inst, "the state pointer is NULL");
     }

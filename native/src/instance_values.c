@@ -17,9 +17,6 @@
 static fmi2Status check_access(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
                                const void *value, VarType type, int setting)
 {
-    if (!instance_ok(inst, setting ? "a setter" : "a getter")) {
-        return fmi2Error;
-    }
     if (nvr > 0 && (!vr || !value)) {
         return ERROR(inst, "value reference or value array is NULL");
     }

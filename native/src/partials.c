@@ -38,9 +38,6 @@ fmi2Status partials_directional(Instance *inst, const char *function,
     double jac[N_VARS][N_KNOWNS];
     int col[N_VARS];
     const int cs = inst->type == fmi2CoSimulation;
-    if (!instance_ok(inst, function)) {
-        return fmi2Error;
-    }
     if ((n_unknowns && (!unknowns || !sensitivity)) || (n_knowns && (!knowns || !seed))) {
         return ERR(inst, "%s: NULL array with a non-zero count", function);
     }
@@ -86,9 +83,6 @@ fmi2Status partials_output_derivatives(Instance *inst, const char *function,
                                        const unsigned int vrs[], size_t n, const int orders[],
                                        double values[])
 {
-    if (!instance_ok(inst, function)) {
-        return fmi2Error;
-    }
     if (inst->type != fmi2CoSimulation) {
         return ERR(inst, "%s: output derivatives are a co-simulation function", function);
     }
@@ -123,9 +117,6 @@ fmi2Status partials_directional(Instance *inst, const char *function,
 {
     (void)unknowns, (void)n_unknowns, (void)knowns, (void)n_knowns, (void)seed,
         (void)sensitivity;
-    if (!instance_ok(inst, function)) {
-        return fmi2Error;
-    }
     return ERR(inst, "%s: directional derivatives are not provided", function);
 }
 
@@ -134,9 +125,6 @@ fmi2Status partials_output_derivatives(Instance *inst, const char *function,
                                        double values[])
 {
     (void)vrs, (void)n, (void)orders, (void)values;
-    if (!instance_ok(inst, function)) {
-        return fmi2Error;
-    }
     return ERR(inst, "%s: output derivatives are not provided (maxOutputDerivativeOrder=0)",
                function);
 }

@@ -56,84 +56,28 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     return instance_setup(c, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c)
-{
-    LEGAL(c, fmi2EnterInitializationMode);
-    return instance_enter_initialization(c);
-}
+TRANSITION(fmi2EnterInitializationMode, instance_enter_initialization)
+TRANSITION(fmi2ExitInitializationMode, instance_exit_initialization)
+TRANSITION(fmi2Terminate, instance_terminate)
+TRANSITION(fmi2Reset, instance_reset)
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component c)
-{
-    LEGAL(c, fmi2ExitInitializationMode);
-    return instance_exit_initialization(c);
-}
+/* The getters and setters: legal in the instance's state, then the core's of the same type. */
+#define VALUES(function, core, ctype)                                                              \
+    fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,             \
+                        ctype value[])                                                          \
+    {                                                                                           \
+        LEGAL(c, function);                                                                     \
+        return core(c, vr, nvr, value);                                                         \
+    }
 
-fmi2Status fmi2Terminate(fmi2Component c)
-{
-    LEGAL(c, fmi2Terminate);
-    return instance_terminate(c);
-}
-
-fmi2Status fmi2Reset(fmi2Component c)
-{
-    LEGAL(c, fmi2Reset);
-    return instance_reset(c);
-}
-
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
-{
-    LEGAL(c, fmi2GetReal);
-    return instance_get_real(c, vr, nvr, value);
-}
-
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Integer value[])
-{
-    LEGAL(c, fmi2GetInteger);
-    return instance_get_integer(c, vr, nvr, value);
-}
-
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Boolean value[])
-{
-    LEGAL(c, fmi2GetBoolean);
-    return instance_get_boolean(c, vr, nvr, value);
-}
-
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         fmi2String value[])
-{
-    LEGAL(c, fmi2GetString);
-    return instance_get_string(c, vr, nvr, value);
-}
-
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       const fmi2Real value[])
-{
-    LEGAL(c, fmi2SetReal);
-    return instance_set_real(c, vr, nvr, value);
-}
-
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Integer value[])
-{
-    LEGAL(c, fmi2SetInteger);
-    return instance_set_integer(c, vr, nvr, value);
-}
-
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Boolean value[])
-{
-    LEGAL(c, fmi2SetBoolean);
-    return instance_set_boolean(c, vr, nvr, value);
-}
-
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         const fmi2String value[])
-{
-    LEGAL(c, fmi2SetString);
-    return instance_set_string(c, vr, nvr, value);
-}
+VALUES(fmi2GetReal, instance_get_real, fmi2Real)
+VALUES(fmi2GetInteger, instance_get_integer, fmi2Integer)
+VALUES(fmi2GetBoolean, instance_get_boolean, fmi2Boolean)
+VALUES(fmi2GetString, instance_get_string, fmi2String)
+VALUES(fmi2SetReal, instance_set_real, const fmi2Real)
+VALUES(fmi2SetInteger, instance_set_integer, const fmi2Integer)
+VALUES(fmi2SetBoolean, instance_set_boolean, const fmi2Boolean)
+VALUES(fmi2SetString, instance_set_string, const fmi2String)
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
@@ -221,50 +165,48 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
                                        order, value);
 }
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+/* A status query's arguments: value not NULL and s the one kind the query answers here. */
+static int status_query_ok(Instance *inst, const char *function, const void *value,
+                           fmi2StatusKind s, fmi2StatusKind answered, const char *answered_name)
 {
-    (void)s, (void)value;
-    return REFUSE(c, "fmi2GetStatus", "fmi2GetStatus: no asynchronous step to report on");
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
-{
-    Instance *inst = (Instance *)c;
-    LEGAL(c, fmi2GetRealStatus);
     if (!value) {
-        return ERROR(inst, "fmi2GetRealStatus: value is NULL");
+        log_message(inst, fmi2Error, "logStatusError", "%s: value is NULL", function);
+        return 0;
     }
-    if (s != fmi2LastSuccessfulTime) {
-        return ERROR(inst, "fmi2GetRealStatus supports fmi2LastSuccessfulTime only");
+    if (s != answered) {
+        log_message(inst, fmi2Error, "logStatusError", "%s supports %s only", function,
+                    answered_name);
+        return 0;
     }
-    *value = inst->s.last_time;
-    return fmi2OK;
+    return 1;
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
-{
-    (void)s, (void)value;
-    return REFUSE(c, "fmi2GetIntegerStatus", "fmi2GetIntegerStatus: no integer status");
-}
-
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
-{
-    Instance *inst = (Instance *)c;
-    LEGAL(c, fmi2GetBooleanStatus);
-    if (!value) {
-        return ERROR(inst, "fmi2GetBooleanStatus: value is NULL");
+/* A status query that answers one kind, with the value of answer. */
+#define STATUS_ANSWERED(function, ctype, kind, answer)                                             \
+    fmi2Status function(fmi2Component c, const fmi2StatusKind s, ctype *value)                  \
+    {                                                                                           \
+        LEGAL(c, function);                                                                     \
+        if (!status_query_ok((Instance *)c, #function, value, s, kind, #kind)) {               \
+            return fmi2Error;                                                                   \
+        }                                                                                       \
+        *value = answer;                                                                        \
+        return fmi2OK;                                                                          \
     }
-    if (s != fmi2Terminated) {
-        return ERROR(inst, "fmi2GetBooleanStatus supports fmi2Terminated only");
-    }
-    /* after a refused step: the same step would be refused again (the model is deterministic),
-     * so the master must stop (or go on from another FMU state or with a smaller step) */
-    *value = inst->step_refused ? fmi2True : fmi2False;
-    return fmi2OK;
-}
 
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
-{
-    (void)s, (void)value;
-    return REFUSE(c, "fmi2GetStringStatus", "fmi2GetStringStatus: no string status");
-}
+/* A status query with nothing to answer. */
+#define STATUS_NONE(function, ctype, why)                                                          \
+    fmi2Status function(fmi2Component c, const fmi2StatusKind s, ctype *value)                  \
+    {                                                                                           \
+        (void)s, (void)value;                                                                   \
+        return REFUSE(c, #function, #function ": " why);                                        \
+    }
+
+STATUS_NONE(fmi2GetStatus, fmi2Status, "no asynchronous step to report on")
+STATUS_ANSWERED(fmi2GetRealStatus, fmi2Real, fmi2LastSuccessfulTime, ((Instance *)c)->s.last_time)
+STATUS_NONE(fmi2GetIntegerStatus, fmi2Integer, "no integer status")
+/* fmi2Terminated is true after a refused step: the same step would be refused again (the model
+ * is deterministic), so the master must stop (or go on from another FMU state or with a smaller
+ * step). */
+STATUS_ANSWERED(fmi2GetBooleanStatus, fmi2Boolean, fmi2Terminated,
+                ((Instance *)c)->step_refused ? fmi2True : fmi2False)
+STATUS_NONE(fmi2GetStringStatus, fmi2String, "no string status")

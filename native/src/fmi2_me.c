@@ -7,11 +7,7 @@
 
 #ifdef MODEL_EXCHANGE
 
-fmi2Status fmi2EnterEventMode(fmi2Component c)
-{
-    LEGAL(c, fmi2EnterEventMode);
-    return instance_enter_event_mode(c);
-}
+TRANSITION(fmi2EnterEventMode, instance_enter_event_mode)
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
@@ -19,11 +15,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
     return instance_new_discrete_states(c, eventInfo);
 }
 
-fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
-{
-    LEGAL(c, fmi2EnterContinuousTimeMode);
-    return instance_enter_continuous_time_mode(c);
-}
+TRANSITION(fmi2EnterContinuousTimeMode, instance_enter_continuous_time_mode)
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
                                        fmi2Boolean noSetFMUStatePriorToCurrentPoint,
@@ -41,34 +33,19 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
     return instance_set_time(c, time);
 }
 
-fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
-{
-    LEGAL(c, fmi2SetContinuousStates);
-    return instance_set_continuous_states(c, x, nx);
-}
+/* The functions over the continuous states and event indicators: legal in the instance's
+ * state, then the core's. */
+#define VECTOR(function, core, ctype)                                                              \
+    fmi2Status function(fmi2Component c, ctype values[], size_t n)                              \
+    {                                                                                           \
+        LEGAL(c, function);                                                                     \
+        return core(c, values, n);                                                              \
+    }
 
-fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
-{
-    LEGAL(c, fmi2GetContinuousStates);
-    return instance_get_continuous_states(c, x, nx);
-}
-
-fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
-{
-    LEGAL(c, fmi2GetNominalsOfContinuousStates);
-    return instance_get_nominals(c, x_nominal, nx);
-}
-
-fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
-{
-    LEGAL(c, fmi2GetDerivatives);
-    return instance_get_derivatives(c, derivatives, nx);
-}
-
-fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
-{
-    LEGAL(c, fmi2GetEventIndicators);
-    return instance_get_event_indicators(c, eventIndicators, ni);
-}
+VECTOR(fmi2SetContinuousStates, instance_set_continuous_states, const fmi2Real)
+VECTOR(fmi2GetContinuousStates, instance_get_continuous_states, fmi2Real)
+VECTOR(fmi2GetNominalsOfContinuousStates, instance_get_nominals, fmi2Real)
+VECTOR(fmi2GetDerivatives, instance_get_derivatives, fmi2Real)
+VECTOR(fmi2GetEventIndicators, instance_get_event_indicators, fmi2Real)
 
 #endif

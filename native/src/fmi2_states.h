@@ -68,4 +68,13 @@
     }
 int legal2(Instance *inst, unsigned mask, const char *function);
 
+/* An fmi2 function that changes the state and takes no argument but the instance: legal, then
+ * the core's transition. */
+#define TRANSITION(function, core)                                                             \
+    fmi2Status function(fmi2Component c)                                                       \
+    {                                                                                          \
+        LEGAL(c, function);                                                                    \
+        return core(c);                                                                        \
+    }
+
 #endif

@@ -255,65 +255,39 @@ fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
     return status3(instance_set_time(w->inner, time));
 }
 
-fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
-                                   size_t nContinuousStates)
-{
-    WRAP(fmi3SetContinuousStates);
-    return status3(instance_set_continuous_states(w->inner, continuousStates, nContinuousStates));
-}
-
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
-                                             size_t nContinuousStates)
-{
-    WRAP(fmi3GetContinuousStateDerivatives);
-    return status3(instance_get_derivatives(w->inner, derivatives, nContinuousStates));
-}
-
-fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
-                                  size_t nEventIndicators)
-{
-    WRAP(fmi3GetEventIndicators);
-    return status3(instance_get_event_indicators(w->inner, eventIndicators, nEventIndicators));
-}
-
-fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
-                                   size_t nContinuousStates)
-{
-    WRAP(fmi3GetContinuousStates);
-    return status3(instance_get_continuous_states(w->inner, continuousStates, nContinuousStates));
-}
-
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
-                                             size_t nContinuousStates)
-{
-    WRAP(fmi3GetNominalsOfContinuousStates);
-    return status3(instance_get_nominals(w->inner, nominals, nContinuousStates));
-}
-
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
-{
-    WRAP(fmi3GetNumberOfEventIndicators);
-    if (!nEventIndicators) {
-        return FAIL(w, "fmi3GetNumberOfEventIndicators: NULL output argument");
+/* The functions over the continuous states and event indicators: the core's, on the wrapper's
+ * instance. */
+#define VECTOR3(function, core, ctype)                                                             \
+    fmi3Status function(fmi3Instance instance, ctype values[], size_t n)                       \
+    {                                                                                          \
+        WRAP(function);                                                                        \
+        return status3(core(w->inner, values, n));                                             \
     }
-#ifdef MODEL_EXCHANGE
-    *nEventIndicators = N_EVENT_INDICATORS;
-#else
-    *nEventIndicators = 0;
-#endif
-    return fmi3OK;
-}
 
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates)
-{
-    WRAP(fmi3GetNumberOfContinuousStates);
-    if (!nContinuousStates) {
-        return FAIL(w, "fmi3GetNumberOfContinuousStates: NULL output argument");
-    }
+VECTOR3(fmi3SetContinuousStates, instance_set_continuous_states, const fmi3Float64)
+VECTOR3(fmi3GetContinuousStateDerivatives, instance_get_derivatives, fmi3Float64)
+VECTOR3(fmi3GetEventIndicators, instance_get_event_indicators, fmi3Float64)
+VECTOR3(fmi3GetContinuousStates, instance_get_continuous_states, fmi3Float64)
+VECTOR3(fmi3GetNominalsOfContinuousStates, instance_get_nominals, fmi3Float64)
+
+/* The numbers of continuous states and event indicators (none without Model Exchange). */
 #ifdef MODEL_EXCHANGE
-    *nContinuousStates = N_STATES;
+#define N_STATES3 N_STATES
+#define N_EVENT_INDICATORS3 N_EVENT_INDICATORS
 #else
-    *nContinuousStates = 0;
+#define N_STATES3 0
+#define N_EVENT_INDICATORS3 0
 #endif
-    return fmi3OK;
-}
+#define COUNT3(function, count)                                                                    \
+    fmi3Status function(fmi3Instance instance, size_t *n)                                      \
+    {                                                                                          \
+        WRAP(function);                                                                        \
+        if (!n) {                                                                              \
+            return FAIL(w, #function ": NULL output argument");                                \
+        }                                                                                      \
+        *n = count;                                                                            \
+        return fmi3OK;                                                                         \
+    }
+
+COUNT3(fmi3GetNumberOfEventIndicators, N_EVENT_INDICATORS3)
+COUNT3(fmi3GetNumberOfContinuousStates, N_STATES3)

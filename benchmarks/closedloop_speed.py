@@ -34,21 +34,31 @@ def master(fmus: Path) -> tuple[float, np.ndarray, list[str]]:
     return wall, result.data[:, 1:], result.names[1:]
 
 
+def run_alone(fmu: Path, names: list[str], stop: float, h: float = H, parameters=None):
+    """The FMU stepped alone from t_i = i h (as the master steps); rows of names at each t_i
+    (also tests/test_closedloop.py's)."""
+    inst = open_fmu(fmu, "loop")
+    try:
+        inst.setup(0.0, stop)
+        inst.set(parameters or {})
+        inst.enter_initialization()
+        inst.exit_initialization()
+        read = inst.real_getter(names)
+        rows = [read()]
+        for i in range(round(stop / h)):
+            inst.step(i * h, h)
+            rows.append(read())
+        inst.terminate()
+    finally:
+        inst.free()
+    return np.array(rows)
+
+
 def closed_loop(fmus: Path, names: list[str]) -> tuple[float, np.ndarray]:
     """Wall time of the closed-loop FMU stepped from Python (ctypes), and its rows."""
     start = time.perf_counter()
-    inst = open_fmu(fmus / "native" / "PaperClosedLoop-observer.fmu", "loop")
-    inst.setup(0.0, STOP)
-    inst.enter_initialization()
-    inst.exit_initialization()
-    read = inst.real_getter(names)
-    rows = [read()]
-    for i in range(round(STOP / H)):
-        inst.step(i * H, H)
-        rows.append(read())
-    inst.terminate()
-    inst.free()
-    return time.perf_counter() - start, np.array(rows)
+    rows = run_alone(fmus / "native" / "PaperClosedLoop-observer.fmu", names, STOP)
+    return time.perf_counter() - start, rows
 
 
 def main() -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -108,6 +110,25 @@ def contact_torques(seconds: float, parameters: dict | None = None) -> list[tupl
         torques.append(tau)
         plant.do_step(i * DT, DT, tau)
     return torques
+
+
+def run_bridge_in_child(ssp_path: Path, bridge: Path, port: int, token: str) -> list[str]:
+    """A 1 s run of SSP_PATH, its plant the bridge FMU BRIDGE on the robot at 127.0.0.1:PORT with
+    TOKEN (0.3 s to initialize), in a child process: an error during initialization reaches the
+    master as fmi2Fatal, after which pythonfmu 0.7 has corrupted the interpreter (a later garbage
+    collection crashes it; see docs/limitations.md). The run's ok, rows and error, as printed."""
+    code = (
+        "from impedance_cosim.cosim.master.master import Master\n"
+        "from impedance_cosim.cosim.master.options import RunOptions\n"
+        "from impedance_cosim.cosim.ssp.read import read_ssp\n"
+        f"r = Master(read_ssp({str(ssp_path)!r}), RunOptions(stop_time=1.0, fmu_files={{'plant': "
+        f"{str(bridge)!r}}}, overrides={{'plant.robot_port': {port}, "
+        f"'plant.robot_token': {token!r}, 'plant.init_timeout_s': 0.3}})).run()\n"
+        "print(r.ok, len(r.data), r.error, flush=True)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)  # fmt: skip
+    return done.stdout.split(" ", 2)
 
 
 @pytest.fixture(scope="session")

@@ -6,6 +6,7 @@ Checker."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shutil
@@ -32,6 +33,12 @@ from plant_model.model import PlantModel
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
 H = 1 / 400
+SPEED = Path(__file__).resolve().parent.parent / "benchmarks" / "closedloop_speed.py"
+spec = importlib.util.spec_from_file_location("closedloop_speed", SPEED)
+assert spec and spec.loader
+closedloop_speed = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(closedloop_speed)
+run_alone = closedloop_speed.run_alone  # the FMU stepped alone, rows of names at each t_i
 FLOOR = 1e-9  # the issue's bound; measured: 0.0 on every output (difference 0)
 N_OUTPUTS = sum(
     v.causality == "output" for m in (PlantModel, ControllerModel) for v in m.variables()
@@ -66,25 +73,6 @@ def master_run(native_ssp: Path, scenario: str, stop: float, overrides=None):
         ).run()
     assert result.error is None, result.error
     return result
-
-
-def run_alone(fmu: Path, names: list[str], stop: float, h: float = H, parameters=None):
-    """The FMU stepped alone from t_i = i h (as the master steps); rows of names at each t_i."""
-    inst = open_fmu(fmu, "loop")
-    try:
-        inst.setup(0.0, stop)
-        inst.set(parameters or {})
-        inst.enter_initialization()
-        inst.exit_initialization()
-        read = inst.real_getter(names)
-        rows = [read()]
-        for i in range(round(stop / h)):
-            inst.step(i * h, h)
-            rows.append(read())
-        inst.terminate()
-    finally:
-        inst.free()
-    return np.array(rows)
 
 
 @pytest.mark.parametrize("fmi", [2, 3])

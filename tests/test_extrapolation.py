@@ -146,43 +146,20 @@ def test_refusals_name_the_problem(ssp_path, native_ssp):
         assert "q1 has no time derivative" in quantized.error
 
 
+def _linear_jacobi_run(ssp, out) -> list[str]:
+    """The command line of a 0.1 s Jacobi run of SSP with linear extrapolation into OUT."""
+    return ["run", "--ssp", str(ssp), "--stop", "0.1", "--algorithm", "jacobi",
+            "--extrapolation", "linear", "--out", str(out), "--no-figures"]  # fmt: skip
+
+
 def test_cli_records_it_in_run_json_and_refuses_the_python_plant(native_ssp, ssp_path, tmp_path,
                                                                  capsys):  # fmt: skip
     out = tmp_path / "res"
-    argv = [
-        "run",
-        "--ssp",
-        str(native_ssp),
-        "--stop",
-        "0.1",
-        "--algorithm",
-        "jacobi",
-        "--extrapolation",
-        "linear",
-        "--out",
-        str(out),
-        "--no-figures",
-        "--no-progress",
-    ]
-    assert main(argv) == 0
+    assert main([*_linear_jacobi_run(native_ssp, out), "--no-progress"]) == 0
     (run,) = json.loads((out / "run.json").read_text())["runs"]
     assert run["extrapolation"] == "linear" and run["algorithm"] == "jacobi"
     capsys.readouterr()
-    bad = [
-        "run",
-        "--ssp",
-        str(ssp_path),
-        "--stop",
-        "0.1",
-        "--algorithm",
-        "jacobi",
-        "--extrapolation",
-        "linear",
-        "--out",
-        str(tmp_path / "bad"),
-        "--no-figures",
-    ]
-    assert main(bad) == 2
+    assert main(_linear_jacobi_run(ssp_path, tmp_path / "bad")) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "maxOutputDerivativeOrder" in err[0], err
     assert not np.any([p.exists() for p in [tmp_path / "bad" / "run.json"]])

@@ -12,39 +12,18 @@ from itertools import cycle
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
-from fmpy.fmi3 import FMU3Slave
+from fmi3_loop import ClosedLoop, Fmu
+from fmpy import read_model_description
 
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
-from impedance_cosim.cosim.system.paper import CONNECTIONS
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
 DT = 1 / 400
 ERROR = 3  # fmi3Error
 VARIABLE = [0.0007, 0.0031, 0.0012, 0.0025, 0.004, 0.0001]  # s, repeated
-
-
-class Fmu:
-    """An FMI 3.0 Co-Simulation instance under fmpy, its log kept."""
-
-    def __init__(self, fmi3_dir, name: str, **instantiate):
-        path = str(fmi3_dir / f"{name}.fmu")
-        md = read_model_description(path)
-        self.md = md
-        self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        self.log: list[str] = []
-        self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=name,
-                             instanceName=name)  # fmt: skip
-        self.fmu.instantiate(logMessage=lambda _e, _s, _c, m: self.log.append(m.decode()),
-                             **instantiate)  # fmt: skip
-
-    def set_parameters(self, values: dict) -> None:
-        by_name = {v.name: v for v in self.md.modelVariables}
-        for name, value in values.items():
-            getattr(self.fmu, f"set{by_name[name].type}")([by_name[name].valueReference], [value])
 
 
 def _steps(h, seconds: float) -> list[tuple[float, float]]:
@@ -60,37 +39,16 @@ def _steps(h, seconds: float) -> list[tuple[float, float]]:
         t += size
 
 
-class Loop:
-    """The closed loop: the FMI 3.0 plant and the controller (instantiated as given); the
-    torques the plant got in each of its steps, and the samples taken in Event Mode."""
+class Loop(ClosedLoop):
+    """The closed loop: the FMI 3.0 plant and the controller (instantiated as given) in
+    Co-Simulation; the torques the plant got in each of its steps, and the samples taken in
+    Event Mode."""
 
     def __init__(self, fmu_dir, fmi3_dir, **controller):
-        params = Master(read_ssp(fmu_dir / "PaperScenario-fmi3.ssp"),
-                        RunOptions(parameter_set="observer")).parameters  # fmt: skip
         self.event_mode = controller.get("eventModeUsed", False)
-        self.plant = Fmu(fmi3_dir, "PumaPlant")
-        self.ctrl = Fmu(fmi3_dir, "ImpedanceController", **controller)
-        for fmu, name in ((self.plant, "plant"), (self.ctrl, "controller")):
-            fmu.fmu.enterInitializationMode(startTime=0.0)
-            fmu.set_parameters(params[name])
-        p, c = self.plant.vr, self.ctrl.vr
-        self.links = [(p[s], c[e]) for sc, s, _ec, e in CONNECTIONS if sc == "plant"]
-        self.tau = [(c[s], p[e]) for sc, s, _ec, e in CONNECTIONS if sc == "controller"]
-        self.inputs()
-        self.torques()
-        self.plant.fmu.exitInitializationMode()
-        self.ctrl.fmu.exitInitializationMode()
-        self.samples: list[tuple[float, list[float]]] = []
+        super().__init__(fmu_dir, Fmu(fmi3_dir, "PumaPlant"),
+                         Fmu(fmi3_dir, "ImpedanceController", **controller))  # fmt: skip
         self.applied: list[list[float]] = []
-
-    def inputs(self) -> None:
-        self.ctrl.fmu.setFloat64([c for _, c in self.links],
-                                 self.plant.fmu.getFloat64([p for p, _ in self.links]))  # fmt: skip
-
-    def torques(self) -> list[float]:
-        tau = self.ctrl.fmu.getFloat64([c for c, _ in self.tau])
-        self.plant.fmu.setFloat64([p for _, p in self.tau], tau)
-        return tau
 
     def event(self, t: float) -> float:
         """Event Mode at t: the clock is active (fmi3GetClock, an answer the standard asks only

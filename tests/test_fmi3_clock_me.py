@@ -15,13 +15,13 @@ from ctypes import POINTER, c_double
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmi3_loop import ClosedLoop, Fmu
+from fmpy import read_model_description
 from fmpy.fmi3 import FMU3Model
 
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
-from impedance_cosim.cosim.system.paper import CONNECTIONS
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
@@ -30,30 +30,11 @@ SUBSTEPS = 10  # the plant's Euler substeps per sample period
 SECONDS = 4.5  # past the wall contact at 3.85 s
 
 
-class Fmu:
-    """An FMI 3.0 Model Exchange instance under fmpy, its log kept."""
-
-    def __init__(self, fmi3_dir, name: str):
-        path = str(fmi3_dir / f"{name}.fmu")
-        md = read_model_description(path)
-        self.md = md
-        self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        self.log: list[str] = []
-        self.fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=name,
-                             instanceName=name)  # fmt: skip
-        self.fmu.instantiate(logMessage=lambda _e, _s, _c, m: self.log.append(m.decode()))
-
-    def set_parameters(self, values: dict) -> None:
-        by_name = {v.name: v for v in self.md.modelVariables}
-        for name, value in values.items():
-            getattr(self.fmu, f"set{by_name[name].type}")([by_name[name].valueReference], [value])
-
-
 class Plant(Fmu):
     """The plant in Model Exchange, integrated by explicit Euler steps (as ode_euler_step)."""
 
     def __init__(self, fmi3_dir):
-        super().__init__(fmi3_dir, "PumaPlant")
+        super().__init__(fmi3_dir, "PumaPlant", FMU3Model)
         self.x, self.dx, self.z = np.zeros(6), np.zeros(6), np.zeros(1)
         self.switch_times: list[float] = []
 
@@ -80,43 +61,18 @@ class Plant(Fmu):
             self.fmu.enterContinuousTimeMode()
 
 
-def _parameters(fmu_dir) -> dict:
-    system = read_ssp(fmu_dir / "PaperScenario-fmi3.ssp")
-    return Master(system, RunOptions(parameter_set="observer")).parameters
-
-
-class Loop:
+class Loop(ClosedLoop):
     """The closed loop in Model Exchange: at each tick (the controller's nextEventTime) the
     controller's Event Mode (fmi3SetClock where set_clock), then the plant's Euler substeps to
     the next tick on the torques of the sample."""
 
     def __init__(self, fmu_dir, fmi3_dir, set_clock: bool = True):
-        params = _parameters(fmu_dir)
         self.set_clock = set_clock
-        self.plant, self.ctrl = Plant(fmi3_dir), Fmu(fmi3_dir, "ImpedanceController")
+        super().__init__(fmu_dir, Plant(fmi3_dir),
+                         Fmu(fmi3_dir, "ImpedanceController", FMU3Model))  # fmt: skip
         self.clock = self.ctrl.vr["sample_clock"]
-        for fmu, name in ((self.plant, "plant"), (self.ctrl, "controller")):
-            fmu.fmu.enterInitializationMode(startTime=0.0)
-            fmu.set_parameters(params[name])
-        p, c = self.plant.vr, self.ctrl.vr
-        self.links = [(p[s], c[e]) for sc, s, _ec, e in CONNECTIONS if sc == "plant"]
-        self.tau = [(c[s], p[e]) for sc, s, _ec, e in CONNECTIONS if sc == "controller"]
-        self.inputs()
-        self.torques()
-        self.plant.fmu.exitInitializationMode()
-        self.ctrl.fmu.exitInitializationMode()
         self.plant.event_iteration()
         self.plant.fmu.enterContinuousTimeMode()
-        self.samples: list[tuple[float, list[float]]] = []
-
-    def inputs(self) -> None:
-        self.ctrl.fmu.setFloat64([c for _, c in self.links],
-                                 self.plant.fmu.getFloat64([p for p, _ in self.links]))  # fmt: skip
-
-    def torques(self) -> list[float]:
-        tau = self.ctrl.fmu.getFloat64([c for c, _ in self.tau])
-        self.plant.fmu.setFloat64([p for _, p in self.tau], tau)
-        return tau
 
     def tick(self, t: float) -> float:
         """The controller's Event Mode at the tick t: the clock active, the sample; the next."""

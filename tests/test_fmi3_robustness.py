@@ -10,16 +10,15 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
+from c_hosts import build_host, links_and_record
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.ssp.read import read_ssp
-from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging.build_fmi3 import CLOCKED_NAME
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
@@ -181,11 +180,7 @@ def test_interfaces_not_offered_are_refused(fmi3_dir):
 
 
 def _host(tmp_path: Path) -> Path:
-    exe = tmp_path / "host3"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{headers}",
-                    str(HOST), "-ldl", "-o", str(exe)], check=True)  # fmt: skip
-    return exe
+    return build_host(HOST, tmp_path / "host3")
 
 
 def _host_args(fmi3_dir: Path, steps: int, out: Path) -> list[str]:
@@ -196,13 +191,7 @@ def _host_args(fmi3_dir: Path, steps: int, out: Path) -> list[str]:
         vrs[name] = {v.name: v.valueReference for v in md.modelVariables}
         args += [str(unzip / "binaries" / "x86_64-linux" / f"{md.coSimulation.modelIdentifier}.so"),
                  md.guid]  # fmt: skip
-    letter = {"controller": "A", "plant": "B"}
-    links = ",".join(
-        f"{letter[se]}{vrs[se][sc]}>{letter[ee]}{vrs[ee][ec]}" for se, sc, ee, ec in CONNECTIONS
-    )
-    record = ",".join([f"B{vrs['plant'][n]}" for n in ("x", "y", "contact_force")]
-                      + [f"A{vrs['controller'][f'tau{i}']}" for i in (1, 2, 3)])  # fmt: skip
-    return [*args, str(steps), "1/400", str(out), links, record]
+    return [*args, str(steps), "1/400", str(out), *links_and_record(vrs)]
 
 
 def test_c_host_runs_fmi3_closed_loop_as_our_master(fmu_dir, fmi3_dir, tmp_path):
@@ -236,10 +225,7 @@ def test_fmi3_no_leaks_under_valgrind(fmi3_dir, tmp_path):
 
 def _free_in_update(fmi3_dir: Path, tmp_path: Path) -> list[str]:
     """The C host of free_in_update.c, built, and its arguments for the FMI 3.0 plant."""
-    exe = tmp_path / "free_in_update"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    subprocess.run(["gcc", "-std=c99", "-O0", "-g", "-Wall", "-Wextra", "-Werror", f"-I{headers}",
-                    str(FREE_IN_UPDATE), "-ldl", "-o", str(exe)], check=True)  # fmt: skip
+    exe = build_host(FREE_IN_UPDATE, tmp_path / "free_in_update", "-O0", "-g")
     md = read_model_description(str(fmi3_dir / PLANT))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     lib = Path(extract(str(fmi3_dir / PLANT))) / "binaries" / "x86_64-linux" / "PumaPlant.so"

@@ -13,6 +13,7 @@ the two work-bound parameters are kept small when set (a fuzzer that sets max_rh
 from __future__ import annotations
 
 import ctypes
+import functools
 import random
 import shutil
 import struct
@@ -35,6 +36,19 @@ ME_FUNCTIONS = ["fmi2SetTime", "fmi2SetContinuousStates", "fmi2GetContinuousStat
                 "fmi2GetDerivatives", "fmi2GetEventIndicators", "fmi2EnterEventMode",
                 "fmi2NewDiscreteStates", "fmi2EnterContinuousTimeMode",
                 "fmi2CompletedIntegratorStep", "fmi2GetNominalsOfContinuousStates"]  # fmt: skip
+
+
+def _on_a_component(call):
+    """The Fuzzer's CALL(self, c) on the component c it picks (Fuzzer.component: live, or now
+    and then freed); no call while no instance is live."""
+
+    @functools.wraps(call)
+    def on_component(self) -> None:
+        c = self.component()
+        if c is not None:
+            call(self, c)
+
+    return on_component
 
 
 class Fuzzer:
@@ -142,10 +156,8 @@ class Fuzzer:
             self.live.append(c)
             self.t[c] = 0.0
 
-    def free(self) -> None:
-        c = self.component()
-        if c is None:
-            return
+    @_on_a_component
+    def free(self, c: int) -> None:
         for s in [s for s in self.states if s[0] == c]:  # states die with their instance
             self.states.remove(s)
             self.f["fmi2FreeFMUstate"](c, ctypes.byref(ctypes.c_void_p(s[1])))
@@ -154,20 +166,16 @@ class Fuzzer:
             self.live.remove(c)
             self.dead.append(c)
 
-    def initialize(self) -> None:
+    @_on_a_component
+    def initialize(self, c: int) -> None:
         """The ordinary way in, so that stepping and states are reached often."""
-        c = self.component()
-        if c is None:
-            return
         self.f["fmi2SetupExperiment"](c, 0, 0.0, 0.0, 0, 0.0)
         self.f["fmi2EnterInitializationMode"](c)
         self.f["fmi2ExitInitializationMode"](c)
         self.t[c] = 0.0
 
-    def lifecycle(self) -> None:
-        c = self.component()
-        if c is None:
-            return
+    @_on_a_component
+    def lifecycle(self, c: int) -> None:
         r = self.rng
         name = r.choice(["fmi2SetupExperiment", "fmi2EnterInitializationMode",
                          "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset",
@@ -183,10 +191,8 @@ class Fuzzer:
         if name == "fmi2Reset":
             self.t[c] = 0.0
 
-    def set_values(self) -> None:
-        c = self.component()
-        if c is None:
-            return
+    @_on_a_component
+    def set_values(self, c: int) -> None:
         r = self.rng
         type_name = r.choice(["Real", "Integer", "Boolean", "String"])
         vrs = self.vrs(type_name)
@@ -208,10 +214,8 @@ class Fuzzer:
             values = [r.choice(STRINGS) for _ in vrs]
             self.f["fmi2SetString"](c, vr, n, (ctypes.c_char_p * n)(*values))
 
-    def get_values(self) -> None:
-        c = self.component()
-        if c is None:
-            return
+    @_on_a_component
+    def get_values(self, c: int) -> None:
         type_name = self.rng.choice(["Real", "Integer", "Boolean", "String"])
         vrs = self.vrs(type_name)
         n = len(vrs)
@@ -224,10 +228,8 @@ class Fuzzer:
             for v in values:  # read every returned string to its NUL
                 assert v is not None and len(v) < 64
 
-    def do_step(self) -> None:
-        c = self.component()
-        if c is None:
-            return
+    @_on_a_component
+    def do_step(self, c: int) -> None:
         r = self.rng
         t = self.t.get(c, 0.0)
         if r.random() < 0.15:
@@ -240,12 +242,12 @@ class Fuzzer:
         real = ctypes.c_double()
         self.f["fmi2GetRealStatus"](c, 2, ctypes.byref(real))  # fmi2LastSuccessfulTime
 
-    def me_op(self) -> None:
+    @_on_a_component
+    def me_op(self, c: int) -> None:
         """A Model Exchange call (on any instance: co-simulation ones must refuse it)."""
         from fmpy.fmi2 import fmi2EventInfo
 
-        c = self.component()
-        if c is None or not self.me:
+        if not self.me:
             return
         r = self.rng
         name = r.choice(ME_FUNCTIONS)
@@ -266,10 +268,8 @@ class Fuzzer:
         else:
             self.f[name](c, (ctypes.c_double * max(n, 1))(), n)
 
-    def state_op(self) -> None:
-        c = self.component()
-        if c is None:
-            return
+    @_on_a_component
+    def state_op(self, c: int) -> None:
         r = self.rng
         own = [s for s in self.states if s[0] == c]
         op = r.choice(["get", "get", "set", "set", "free", "serialize", "deserialize",

@@ -7,14 +7,13 @@ from __future__ import annotations
 import re
 import shutil
 import socket
-import subprocess
-import sys
 import time
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_bridge_in_child
 
 from bridge_model import protocol
 from impedance_cosim.apps.hil import replacement_problems
@@ -272,20 +271,7 @@ def test_a_robot_that_never_starts_fails_the_initialization(ssp_path, bridge):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # free now, and nobody listens
-    code = (
-        "import sys, time\n"
-        "from impedance_cosim.cosim.master.master import Master\n"
-        "from impedance_cosim.cosim.master.options import RunOptions\n"
-        "from impedance_cosim.cosim.ssp.read import read_ssp\n"
-        "start = time.perf_counter()\n"
-        f"r = Master(read_ssp({str(ssp_path)!r}), RunOptions(stop_time=1.0, fmu_files={{'plant': "
-        f"{str(bridge)!r}}}, overrides={{'plant.robot_port': {port}, "
-        f"'plant.robot_token': {TOKEN!r}, 'plant.init_timeout_s': 0.3}})).run()\n"
-        "print(r.ok, len(r.data), round(time.perf_counter() - start, 2), r.error, flush=True)\n"
-    )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=60)  # fmt: skip
-    ok, rows, seconds, error = done.stdout.split(" ", 3)
+    ok, rows, error = run_bridge_in_child(ssp_path, bridge, port, TOKEN)
     assert ok == "False" and rows == "0"
     assert f"robot process not reachable at 127.0.0.1:{port}" in error
 

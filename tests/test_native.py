@@ -13,6 +13,7 @@ from pathlib import Path
 import fmpy
 import numpy as np
 import pytest
+from c_hosts import build_host, links_and_record
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 from fmu_steps import output_names, rows_after
@@ -22,7 +23,6 @@ from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.master.options import RunOptions
 from impedance_cosim.cosim.results.result import read_csv
 from impedance_cosim.cosim.ssp.read import read_ssp
-from impedance_cosim.cosim.system.paper import CONNECTIONS
 from impedance_cosim.packaging.regression import REFERENCES, compare
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
@@ -88,11 +88,7 @@ def test_swapping_flavours_is_a_change_of_file(ssp_path, native_dir):
 
 
 def _host(tmp_path: Path) -> Path:
-    exe = tmp_path / "host"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{headers}",
-                    str(HOST), "-ldl", "-o", str(exe)], check=True)  # fmt: skip
-    return exe
+    return build_host(HOST, tmp_path / "host")
 
 
 def _host_args(native_dir: Path, steps: int, out: Path) -> list[str]:
@@ -106,15 +102,7 @@ def _host_args(native_dir: Path, steps: int, out: Path) -> list[str]:
         mds[name] = {v.name: v.valueReference for v in md.modelVariables}
         lib = unzip / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
         args += [str(lib), md.guid, (unzip / "resources").as_uri()]
-    letter = {"controller": "A", "plant": "B"}
-    links = ",".join(
-        f"{letter[se]}{mds[se][sc]}>{letter[ee]}{mds[ee][ec]}" for se, sc, ee, ec in CONNECTIONS
-    )
-    record = ",".join(
-        [f"B{mds['plant'][n]}" for n in ("x", "y", "contact_force")]
-        + [f"A{mds['controller'][f'tau{i}']}" for i in (1, 2, 3)]
-    )
-    return [*args, str(steps), repr(DT), str(out), links, record]
+    return [*args, str(steps), repr(DT), str(out), *links_and_record(mds)]
 
 
 def test_c_host_runs_the_closed_loop_without_python(native_dir, tmp_path, both_runs):

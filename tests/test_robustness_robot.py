@@ -10,13 +10,13 @@ import os
 import random
 import socket
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_bridge_in_child
 
 from bridge_model import protocol
 from impedance_cosim.apps.robot import RobotServer
@@ -371,18 +371,8 @@ def test_a_bridge_with_another_token_fails_initialization(ssp_path, fmu_dir, rob
     """In a child process (an initialization error corrupts pythonfmu 0.7's interpreter): the
     robot drops every datagram of a bridge with another token; the bridge says so."""
     port = robot()
-    code = (
-        "from impedance_cosim.cosim.master.master import Master\n"
-        "from impedance_cosim.cosim.master.options import RunOptions\n"
-        "from impedance_cosim.cosim.ssp.read import read_ssp\n"
-        f"r = Master(read_ssp({str(ssp_path)!r}), RunOptions(stop_time=1.0, fmu_files={{'plant': "
-        f"{str(fmu_dir / 'BridgePlant.fmu')!r}}}, overrides={{'plant.robot_port': {port}, "
-        f"'plant.robot_token': {protocol.new_token()!r}, 'plant.init_timeout_s': 0.3}})).run()\n"
-        "print(r.ok, len(r.data), r.error, flush=True)\n"
-    )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=60)  # fmt: skip
-    ok, rows, error = done.stdout.split(" ", 2)
+    bridge = fmu_dir / "BridgePlant.fmu"
+    ok, rows, error = run_bridge_in_child(ssp_path, bridge, port, protocol.new_token())
     assert ok == "False" and rows == "0"
     assert "timeout after 300 ms waiting for the reply to INIT" in error
     assert "a robot with another session token drops every message" in error

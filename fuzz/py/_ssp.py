@@ -6,6 +6,7 @@ validation off for that input, so that the reader's own checks are fuzzed alone.
 from __future__ import annotations
 
 import io
+import sys
 import tempfile
 import zipfile
 from pathlib import Path
@@ -25,6 +26,8 @@ class _AnythingGoes:
 
 
 class Target:
+    """The fuzz target on the built system archive ARCHIVE (an ssp*.py's TARGET)."""
+
     def __init__(self, archive: str) -> None:
         self.archive = archive
         self.members: list[tuple[str, bytes]] | None = None
@@ -70,3 +73,10 @@ class Target:
             out[Path(name).stem] = bytes([k]) + content
             out[Path(name).stem + "-noschema"] = bytes([k | 0x80]) + content
         return out
+
+    def fuzz_if_run(self, module: str) -> None:
+        """Fuzz entry under atheris (_common.main) where MODULE, the target's __name__, is the
+        script run (benchmarks/fuzz.py runs fuzz/py/ssp1.py, ssp2.py)."""
+        if module == "__main__":
+            _common.main(self.entry)
+            sys.exit(0)

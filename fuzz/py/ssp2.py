@@ -4,14 +4,8 @@ replaced by the fuzz bytes; see _ssp.py)."""
 
 from __future__ import annotations
 
-import sys
-
-import _common
 from _ssp import Target
 
 TARGET = Target("PaperScenario-fmi3-ssp2.ssp")
 entry = TARGET.entry
-
-if __name__ == "__main__":
-    _common.main(entry)
-    sys.exit(0)
+TARGET.fuzz_if_run(__name__)

@@ -148,34 +148,28 @@ def _experiment() -> dict[str, float]:
     return {"startTime": 0.0, "stopTime": 20.0, "stepSize": STEP}
 
 
+def _fields(scenario: str, standard: str) -> dict:
+    """What the FMI 2.0 and 3.0 modelDescription.xml of a closed loop share."""
+    return {
+        "model_name": model_identifier(scenario),
+        "description": _description(scenario),
+        "variables": variables(scenario),
+        "default_experiment": _experiment(),
+        "generation_tool": f"impedance_cosim {__version__} (native C99, {standard}closed loop)",
+        "output_dependencies": "",
+        "naming": "structured",
+    }
+
+
 def xml2(scenario: str, guid: str, c_files: list[str]) -> bytes:
     """The FMI 2.0 modelDescription.xml (Co-Simulation only; no inputs)."""
-    return model_description(
-        model_name=model_identifier(scenario),
-        description=_description(scenario),
-        guid=guid,
-        variables=variables(scenario),
-        default_experiment=_experiment(),
-        generation_tool=f"impedance_cosim {__version__} (native C99, closed loop)",
-        output_dependencies="",
-        source_files=c_files,
-        naming="structured",
-    )
+    return model_description(**_fields(scenario, ""), guid=guid, source_files=c_files)
 
 
 def xml3(scenario: str, token: str) -> bytes:
     """The FMI 3.0 modelDescription.xml (Co-Simulation only), with fixedInternalStepSize: the
     loop runs at the controller's sample period (its default, 1/400 s) whatever the host's step."""
-    raw = model_description3(
-        model_name=model_identifier(scenario),
-        description=_description(scenario),
-        token=token,
-        variables=variables(scenario),
-        default_experiment=_experiment(),
-        generation_tool=f"impedance_cosim {__version__} (native C99, FMI 3.0, closed loop)",
-        output_dependencies="",
-        naming="structured",
-    )
+    raw = model_description3(**_fields(scenario, "FMI 3.0, "), token=token)
     root = ET.fromstring(raw)
     root.find("CoSimulation").set("fixedInternalStepSize", repr(STEP))
     ET.indent(root)

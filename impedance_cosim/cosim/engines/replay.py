@@ -8,6 +8,7 @@ The torque is piecewise constant: `tau[i]` is held over [t_i, t_i+1] (the master
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,6 +35,16 @@ def held_input(
     return signal
 
 
+def _fmpy_instance(cls: Any, fmu: Path, interface: str) -> tuple[Any, Any]:
+    """The FMU's model description and fmpy's object (cls) over its interface's library."""
+    from impedance_cosim.cosim.fmus.files import extractions
+
+    _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
+    identifier = getattr(md, interface).modelIdentifier
+    return md, cls(guid=md.guid, unzipDirectory=unzip, modelIdentifier=identifier,
+                   instanceName="replay")  # fmt: skip
+
+
 def cs_crossing_times(
     fmu: Path, t: np.ndarray, tau: np.ndarray, level: float, output: str = "x"
 ) -> tuple[list[float], np.ndarray]:
@@ -42,16 +53,8 @@ def cs_crossing_times(
     depend on the step size) and the joint angles q1_true..q3_true at every t_i."""
     from fmpy.fmi2 import FMU2Slave
 
-    from impedance_cosim.cosim.fmus.files import extractions
-
-    _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
+    md, cs = _fmpy_instance(FMU2Slave, fmu, "coSimulation")
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    cs = FMU2Slave(
-        guid=md.guid,
-        unzipDirectory=unzip,
-        modelIdentifier=md.coSimulation.modelIdentifier,
-        instanceName="replay",
-    )
     cs.instantiate()
     cs.setupExperiment(startTime=float(t[0]))
     cs.enterInitializationMode()
@@ -97,16 +100,8 @@ def me_replay(
     from fmpy import simulate_fmu
     from fmpy.fmi2 import FMU2Model
 
-    from impedance_cosim.cosim.fmus.files import extractions
-
-    _, md, unzip = extractions.acquire(Path(fmu))  # checked, shared, removed at exit
+    md, model = _fmpy_instance(FMU2Model, fmu, "modelExchange")
     nx, nz = len(md.derivatives), md.numberOfEventIndicators
-    model = FMU2Model(
-        guid=md.guid,
-        unzipDirectory=unzip,
-        modelIdentifier=md.modelExchange.modelIdentifier,
-        instanceName="replay",
-    )
     model.instantiate()
     x, z = (ctypes.c_double * nx)(), (ctypes.c_double * max(nz, 1))()
     log = []

@@ -222,14 +222,8 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
 {
-    fmi3Status s;
     WRAP(fmi3EnterContinuousTimeMode);
-    s = status3(instance_enter_continuous_time_mode(w->inner));
-    if (s <= fmi3Warning) {
-        w->state = ST_CONTINUOUS_TIME;
-        w->tick_active = 0;
-    }
-    return s;
+    return entered(w, instance_enter_continuous_time_mode(w->inner), ST_CONTINUOUS_TIME);
 }
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,

@@ -84,6 +84,17 @@ fmi3Status status3(fmi2Status s)
     return s <= fmi2Fatal ? (fmi3Status)s : fmi3Error;
 }
 
+/* The core's transition's status as fmi3Status; where it succeeded, the wrapper is in state and
+ * the sample clock not active (it is only at a tick in Event Mode, which the caller then sets). */
+fmi3Status entered(Wrapper *w, fmi2Status s, State3 state)
+{
+    if (s <= fmi2Warning) {
+        w->state = state;
+        w->tick_active = 0;
+    }
+    return status3(s);
+}
+
 /* The wrapper, if instance is a live FMI 3 instance of this FMU (else NULL, said on stderr:
  * the host's logger lives in the instance and cannot be trusted then). */
 Wrapper *wrapper_of(fmi3Instance instance, const char *function)
@@ -296,13 +307,8 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    fmi3Status s;
     WRAP(fmi3Terminate);
-    s = status3(instance_terminate(w->inner));
-    if (s <= fmi3Warning) {
-        w->state = ST_TERMINATED;
-    }
-    return s;
+    return entered(w, instance_terminate(w->inner), ST_TERMINATED);
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)

@@ -40,6 +40,8 @@ typedef struct {
 
 /* An fmi2Status as fmi3Status (the same numbers; fmi2Pending, never returned, as fmi3Error). */
 fmi3Status status3(fmi2Status s);
+/* The core's transition's status s; where it succeeded, the wrapper in state, its clock inactive. */
+fmi3Status entered(Wrapper *w, fmi2Status s, State3 state);
 /* The wrapper, if instance is a live FMI 3 instance of this FMU (else NULL, said on stderr:
  * the host's logger lives in the instance and cannot be trusted then). */
 Wrapper *wrapper_of(fmi3Instance instance, const char *function);

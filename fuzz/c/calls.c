@@ -192,11 +192,7 @@ int main(int argc, char **argv)
         static const uint8_t run[] = {0, 0, 0, 0, 0,  1, 0, 1, 0, 0, 0, 0, 2, 0, 3, 0, 4, 0,
                                       5, 5, 0, 4, 0, 9, 2, 0, 1, 10, 0, 0, 13, 0, 0, 0, 11, 0,
                                       1, 4, 0, 4, 5, 0, 14, 0, 15, 0, 19, 0};
-        char path[4096];
-        FILE *out;
-        snprintf(path, sizeof path, "%s/run", argv[2]);
-        out = fopen(path, "wb");
-        return !out || fwrite(run, 1, sizeof run, out) != sizeof run || fclose(out) != 0;
+        return write_input(argv[2], "run", run, sizeof run);
     }
     return replay_files(argc, argv);
 }

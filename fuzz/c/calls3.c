@@ -295,11 +295,7 @@ int main(int argc, char **argv)
         static const uint8_t run[] = {0, 0,  6, 1, 3, 0, 1, 1, 0, 0, 0, 0, 2,  3, 5, 0, 1,
                                       4, 14, 6, 1, 0, 4, 11, 2, 1, 2, 13, 0, 16, 0, 0, 0,
                                       14, 0, 3, 14, 0, 1, 17, 0, 19, 0, 26, 27, 31};
-        char path[4096];
-        FILE *out;
-        snprintf(path, sizeof path, "%s/run", argv[2]);
-        out = fopen(path, "wb");
-        return !out || fwrite(run, 1, sizeof run, out) != sizeof run || fclose(out) != 0;
+        return write_input(argv[2], "run", run, sizeof run);
     }
     return replay_files(argc, argv);
 }

@@ -139,11 +139,9 @@ int main(int argc, char **argv)
     if (argc == 3 && strcmp(argv[1], "--seed") == 0) { /* the defaults, 8 steps; one value */
         static const uint8_t runs[][4] = {{8}, {8, 3, 0, 0}, {4, 0x85, 1, 0}};
         for (size_t r = 0; r < sizeof runs / sizeof runs[0]; r++) {
-            char path[4096];
-            FILE *out;
-            snprintf(path, sizeof path, "%s/run%u", argv[2], (unsigned)r);
-            out = fopen(path, "wb");
-            if (!out || fwrite(runs[r], 1, r ? 4 : 1, out) != (r ? 4u : 1u) || fclose(out)) {
+            char name[16];
+            snprintf(name, sizeof name, "run%u", (unsigned)r);
+            if (write_input(argv[2], name, runs[r], r ? 4 : 1)) {
                 return 1;
             }
         }

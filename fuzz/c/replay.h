@@ -27,4 +27,17 @@ static int replay_files(int argc, char **argv)
     printf("replayed %d files\n", argc - 1);
     return 0;
 }
+/* A seed input for the fuzzer (--seed DIR): bytes written as DIR/name; 0, or 1 if it could not
+ * be written. */
+static int write_input(const char *dir, const char *name, const uint8_t *bytes, size_t n)
+{
+    char path[4096];
+    FILE *out;
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    out = fopen(path, "wb");
+    if (!out) {
+        return 1;
+    }
+    return (fwrite(bytes, 1, n, out) != n) | (fclose(out) != 0);
+}
 #endif

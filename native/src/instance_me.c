@@ -63,21 +63,26 @@ static Instance *me_instance(fmi2Component c)
 }
 
 
-/* An array argument of n values where the FMU has expected: NULL or a wrong count is an error. */
-static int bad_array(Instance *inst, const void *array, size_t n, size_t expected,
-                     const char *what)
+/* The Model Exchange instance (me_instance) whose array argument of n values, where the FMU has
+ * expected, is usable; NULL (logged) if the instance or the array is not. */
+static Instance *me_array(fmi2Component c, const void *array, size_t n, size_t expected,
+                          const char *what)
 {
+    Instance *inst = me_instance(c);
+    if (!inst) {
+        return NULL;
+    }
     if (n > 0 && !array) {
         log_message(inst, fmi2Error, "logStatusError", "%s: the %s array is NULL", inst->fn,
                     what);
-        return 1;
+        return NULL;
     }
     if (n != expected) {
         log_message(inst, fmi2Error, "logStatusError", "%s: %lu %s given, this FMU has %lu",
                     inst->fn, (unsigned long)n, what, (unsigned long)expected);
-        return 1;
+        return NULL;
     }
-    return 0;
+    return inst;
 }
 
 /* In initialization mode the outputs come from (re)initialization, as for the getters. */
@@ -181,11 +186,8 @@ fmi2Status instance_set_time(fmi2Component c, fmi2Real time)
 
 fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], size_t nx)
 {
-    Instance *inst = me_instance(c);
+    Instance *inst = me_array(c, x, nx, N_STATES, "states");
     if (!inst) {
-        return fmi2Error;
-    }
-    if (bad_array(inst, x, nx, N_STATES, "states")) {
         return fmi2Error;
     }
     for (size_t k = 0; k < nx; k++) { /* check all before changing anything */
@@ -201,15 +203,8 @@ fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], s
 
 fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t nx)
 {
-    Instance *inst = me_instance(c);
-    fmi2Status status;
-    if (!inst) {
-        return fmi2Error;
-    }
-    if (bad_array(inst, x, nx, N_STATES, "states")) {
-        return fmi2Error;
-    }
-    status = refresh(inst);
+    Instance *inst = me_array(c, x, nx, N_STATES, "states");
+    fmi2Status status = inst ? refresh(inst) : fmi2Error;
     if (status != fmi2OK) {
         return status;
     }
@@ -219,11 +214,8 @@ fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t 
 
 fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
-    Instance *inst = me_instance(c);
+    Instance *inst = me_array(c, x_nominal, nx, N_STATES, "states");
     if (!inst) {
-        return fmi2Error;
-    }
-    if (bad_array(inst, x_nominal, nx, N_STATES, "states")) {
         return fmi2Error;
     }
     for (size_t k = 0; k < nx; k++) {
@@ -236,15 +228,8 @@ fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t n
 
 fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
-    Instance *inst = me_instance(c);
-    fmi2Status status;
-    if (!inst) {
-        return fmi2Error;
-    }
-    if (bad_array(inst, derivatives, nx, N_STATES, "derivatives")) {
-        return fmi2Error;
-    }
-    status = refresh(inst);
+    Instance *inst = me_array(c, derivatives, nx, N_STATES, "derivatives");
+    fmi2Status status = inst ? refresh(inst) : fmi2Error;
     if (status != fmi2OK) {
         return status;
     }
@@ -258,15 +243,8 @@ fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], siz
 
 fmi2Status instance_get_event_indicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
 {
-    Instance *inst = me_instance(c);
-    fmi2Status status;
-    if (!inst) {
-        return fmi2Error;
-    }
-    if (bad_array(inst, eventIndicators, ni, N_EVENT_INDICATORS, "event indicators")) {
-        return fmi2Error;
-    }
-    status = refresh(inst);
+    Instance *inst = me_array(c, eventIndicators, ni, N_EVENT_INDICATORS, "event indicators");
+    fmi2Status status = inst ? refresh(inst) : fmi2Error;
     if (status != fmi2OK) {
         return status;
     }

@@ -202,6 +202,7 @@ def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
     built += [build_native_fmu3(FMUS[k], folder / "arrays", arrays=ARRAYS3[k]) for k in ARRAYS3]
     built.append(build_ssp(out_dir, "PaperScenario-fmi3", folder))
     built.append(build_ssp2(out_dir, folder))  # the SSP 2.0 edition (clocked controller)
+    built.append(build_ssp2(out_dir, folder / "arrays", arrays=True))  # array connectors
     try:
         import pythonfmu3  # noqa: F401
     except ImportError:

@@ -1,12 +1,16 @@
 """The FMI 3.0 array edition (fmus/fmi3/arrays/, issue 37): the joint angles `q`, torques `tau`
 and wrist force/torque `ft` as Float64 arrays of fixed size 3 (native/src/fmi3_arrays.c,
 impedance_cosim/fmi/fmi3_arrays.py). A host on fmpy's FMU3Slave runs the closed loop of the array
-plant and array controller and of the scalar edition: the same torques and angles bit for bit."""
+plant and array controller and of the scalar edition: the same torques and angles bit for bit.
+PaperScenario-fmi3-arrays-ssp2.ssp wires them with SSP 2.0 array connectors; our master moves the
+arrays and records the same rows as with PaperScenario-fmi3-ssp2.ssp."""
 
 from __future__ import annotations
 
 import ctypes
 import shutil
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 import zipfile
 
@@ -18,6 +22,7 @@ from fmpy.validation import validate_fmu
 
 from impedance_cosim.cosim.master.master import Master
 from impedance_cosim.cosim.master.options import RunOptions
+from impedance_cosim.cosim.ssp.archive import SspError
 from impedance_cosim.cosim.ssp.read import read_ssp
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
@@ -142,3 +147,74 @@ def test_the_editions_share_their_sources_the_array_one_adds_the_mapping(fmi3_di
         assert "#define FMI3_ARRAYS {{" in config
         built = a.read("sources/buildDescription.xml").decode()
         assert "fmi3_arrays.c" in built and "fmi3_values.c" in built
+
+
+# the array archive's signals that the scalar archive records under the elements' names
+ELEMENT_NAMES = {
+    **{f"controller.tau[{k}]": f"controller.tau{k}" for k in (1, 2, 3)},
+    **{f"plant.q[{k}]": f"plant.q{k}" for k in (1, 2, 3)},
+    **{f"plant.ft[{k}]": f"plant.{n}" for k, n in ((1, "fx"), (2, "fy"), (3, "n"))},
+}
+
+
+@pytest.mark.parametrize(
+    ("parameter_set", "algorithm"),
+    [("observer", "gauss-seidel"), ("measured", "gauss-seidel"), ("difference", "jacobi")],
+)
+def test_the_array_archive_gives_the_rows_of_the_ssp2_archive_bit_for_bit(
+    fmi3_dir, parameter_set, algorithm
+):
+    runs = []
+    for name in ("PaperScenario-fmi3-arrays-ssp2.ssp", "PaperScenario-fmi3-ssp2.ssp"):
+        options = RunOptions(parameter_set=parameter_set, algorithm=algorithm, stop_time=2.0)
+        runs.append(Master(read_ssp(fmi3_dir.parent / name), options).run())
+    arrays, scalars = runs
+    assert [ELEMENT_NAMES.get(n, n) for n in arrays.names] == scalars.names
+    assert np.array_equal(arrays.data, scalars.data) and len(arrays.data) > 100
+    assert arrays.info["loop"] == "python"  # the compiled loop moves scalars only
+
+
+def test_the_array_archive_validates_and_wires_array_connectors(fmi3_dir):
+    from impedance_cosim.packaging.build_ssp2 import validation_problems
+
+    archive = fmi3_dir.parent / "PaperScenario-fmi3-arrays-ssp2.ssp"
+    assert validation_problems(archive) == []
+    system = read_ssp(archive)
+    sizes = {(c.name, k.name): k.size for c in system.components for k in c.connectors.values()}
+    assert {key for key, size in sizes.items() if size == 3} == {
+        (c, n) for c in ("plant", "controller") for n in ("q", "ft", "tau")
+    }
+    assert ("plant", "q", "controller", "q") in system.connections
+    assert ("controller", "tau", "plant", "tau") in system.connections
+
+
+def test_an_array_connected_to_another_size_is_refused(fmi3_dir, tmp_path):
+    archive = fmi3_dir.parent / "PaperScenario-fmi3-arrays-ssp2.ssp"
+    broken = tmp_path / "broken.ssp"
+    with zipfile.ZipFile(archive) as zin, zipfile.ZipFile(broken, "w") as zout:
+        for name in zin.namelist():
+            data = zin.read(name)
+            if name.endswith(".ssd"):  # the controller's q (its second array connector q)
+                head, tail = data.split(b'name="q" kind="input"', 1)
+                tail = tail.replace(b'size="3"', b'size="2"', 1)
+                data = head + b'name="q" kind="input"' + tail
+            zout.writestr(name, data)
+    with pytest.raises(SspError, match=r"connection plant.q -> controller.q: 3 elements -> 2"):
+        read_ssp(broken)
+
+
+def test_run_on_the_array_archive_writes_the_rows_of_the_ssp2_archive(fmi3_dir, tmp_path):
+    csv = {}
+    for name in ("PaperScenario-fmi3-arrays-ssp2.ssp", "PaperScenario-fmi3-ssp2.ssp"):
+        out = tmp_path / name
+        args = ["run", "--stop", "2", "--ssp", str(fmi3_dir.parent / name), "--no-report",
+                "--out", str(out)]  # fmt: skip
+        done = subprocess.run([sys.executable, "-m", "impedance_cosim.cli", *args],
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        csv[name] = {p.name: p.read_text().split("\n", 1) for p in out.glob("*.csv")}
+    arrays, scalars = csv.values()
+    assert sorted(arrays) == sorted(scalars) and len(arrays) == 4  # the runs of the Fig. 4 pair
+    for name, (header, rows) in arrays.items():
+        assert rows == scalars[name][1], name
+        assert [ELEMENT_NAMES.get(n, n) for n in header.split(",")] == scalars[name][0].split(",")

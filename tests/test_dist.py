@@ -22,7 +22,7 @@ from impedance_cosim.packaging.dist import (
     robot_members,
 )
 
-ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu", "fmi3/*.fmu")
+ARCHIVES = ("*.fmu", "*.ssp", "native/*.fmu", "fmi3/*.fmu", "fmi3/arrays/*.fmu")
 
 
 @pytest.fixture(scope="module")

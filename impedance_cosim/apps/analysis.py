@@ -25,6 +25,17 @@ Signals = Mapping[str, np.ndarray]
 TARGET_FORCE = 1e4 * 0.00196
 
 
+def torque_name(s: Signals, i: int) -> str:
+    """The controller's joint i torque: controller.tau<i>, or controller.tau[<i>] where it is
+    an FMI 3.0 array (the array edition, fmus/fmi3/arrays/)."""
+    name = f"controller.tau{i}"
+    try:
+        s[name]  # any mapping: a RunResult has no `in`
+    except KeyError:
+        return f"controller.tau[{i}]"
+    return name
+
+
 def at_samples(s: Signals, name: str) -> np.ndarray:
     """A controller output at the sample times (row j+1 moved to row j; last row repeated)."""
     v = s[name]
@@ -123,7 +134,7 @@ def summary(s: Signals) -> dict[str, Any]:
     late = err[t[:-1] >= 2.0]
     if late.size:
         out["observer_error_rms_after_2s_m_s"] = float(np.sqrt(np.mean(late**2)))
-    out["peak_torque_N_m"] = [float(np.abs(s[f"controller.tau{i}"]).max()) for i in (1, 2, 3)]
+    out["peak_torque_N_m"] = [float(np.abs(s[torque_name(s, i)]).max()) for i in (1, 2, 3)]
     return out
 
 
@@ -208,7 +219,7 @@ def figure_1(s: Signals, path: Path | None = None) -> Figure:
     ax[1].set(xlabel="t [s]", ylabel="x [m]", title="(b) displacement during the first contact")
     ax[1].legend(fontsize=8)
     for i, c in zip((1, 2, 3), ("C0", "C1", "C2"), strict=True):
-        ax[2].step(t, at_samples(s, f"controller.tau{i}"), where="post", color=c, lw=0.8,
+        ax[2].step(t, at_samples(s, torque_name(s, i)), where="post", color=c, lw=0.8,
                    label=f"$\\tau_{i}$")  # fmt: skip
     ax[2].set(xlabel="t [s]", ylabel="torque [N m]", title="(c) applied joint torques")
     ax[2].legend(fontsize=8)

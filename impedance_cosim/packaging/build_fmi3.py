@@ -8,6 +8,9 @@ native/src/fmi3_*.c (FMI3_GLUE) instead of the FMI 2.0 glue. The FMUs:
   mode in Co-Simulation its sampling is the time-based clock `sample_clock` (CS_CLOCK);
 - ImpedanceControllerClocked.fmu: Scheduled Execution, its sampling as a periodic input clock
   (`sample_clock`, interval = the parameter sample_period), for hosts that schedule clocks;
+- arrays/PumaPlant.fmu, arrays/ImpedanceController.fmu: the array edition, the joint vectors as
+  fixed-size Float64 arrays (fmi/fmi3_arrays.py; fmi3_config.h's FMI3_ARRAYS and
+  native/src/fmi3_arrays.c map them to the table's slots);
 - python/PumaPlant.fmu, python/ImpedanceController.fmu: the Python FMUs as FMI 3.0 (pythonfmu3,
   Co-Simulation), when pythonfmu3 is installed.
 """
@@ -21,6 +24,7 @@ import uuid
 import zipfile
 from pathlib import Path
 
+from impedance_cosim.fmi.fmi3_arrays import ARRAYS3, Fmi3Array, array_description3, c_arrays3
 from impedance_cosim.fmi.fmi3_description import (
     SampleClock,
     c_config3,
@@ -31,6 +35,7 @@ from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,
     FMUS,
+    NATIVE,
     FmuSpec,
     _add_documentation,
     _build_description,
@@ -68,8 +73,8 @@ EARLY_RETURN = {"plant"}
 CS_CLOCK = {"controller"}
 
 
-def _xml(cls, token: str, clock: SampleClock | None, early: bool, cs_clock) -> bytes:
-    return model_description3(
+def _xml(cls, token: str, clock: SampleClock | None, early: bool, cs_clock, arrays) -> bytes:
+    xml = model_description3(
         token=token,
         **model_fields(cls, "native C99, FMI 3.0"),
         model_exchange=getattr(cls, "MODEL_EXCHANGE", None),
@@ -77,12 +82,17 @@ def _xml(cls, token: str, clock: SampleClock | None, early: bool, cs_clock) -> b
         early_return=early,
         cs_clock=cs_clock,
     )
+    return array_description3(xml, arrays) if arrays else xml
 
 
 def build_native_fmu3(
-    spec: FmuSpec, out_dir: Path = DEFAULT_OUT / "fmi3", clock: SampleClock | None = None
+    spec: FmuSpec,
+    out_dir: Path = DEFAULT_OUT / "fmi3",
+    clock: SampleClock | None = None,
+    arrays: tuple[Fmi3Array, ...] = (),
 ) -> Path:
-    """Build the FMI 3.0 native FMU of a model (with clock: its Scheduled Execution variant)."""
+    """Build the FMI 3.0 native FMU of a model (with clock: its Scheduled Execution variant; with
+    arrays: its array edition, those array variables in place of their scalar elements)."""
     import fmpy
 
     cls = spec.load_model_class()
@@ -98,14 +108,20 @@ def build_native_fmu3(
         n_table, me, clock or cs_clock, cls.variables(), early
     ).encode()
     c_files = sorted(n for n in sources if n.endswith(".c"))
-    digest = hashlib.sha256(_xml(cls, "", clock, early, cs_clock))
+    if arrays:  # fmi3_values.c maps the arrays' value references with fmi3_arrays.c
+        for name in ("fmi3_arrays.c", "fmi3_arrays.h"):
+            sources[name] = (NATIVE / "src" / name).read_bytes()
+        scalar_xml = _xml(cls, "", clock, early, cs_clock, ())
+        sources["fmi3_config.h"] += c_arrays3(scalar_xml, arrays).encode()
+        c_files = sorted({*c_files, "fmi3_arrays.c"})
+    digest = hashlib.sha256(_xml(cls, "", clock, early, cs_clock, arrays))
     for name in sorted(sources):
         digest.update(name.encode() + sources[name])
     token = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     sources["guid.h"] = f'#define MODEL_GUID "{token}"\n'.encode()
     sources["buildDescription.xml"] = _build_description(cls.MODEL_NAME, c_files, "3.0")
     target = Path(out_dir) / f"{CLOCKED_NAME if clock else cls.MODEL_NAME}.fmu"
-    xml = _xml(cls, token, clock, early, cs_clock)
+    xml = _xml(cls, token, clock, early, cs_clock, arrays)
     return pack_native_fmu(target, xml, sources, c_files, cls.MODEL_NAME, fmi_version=3)
 
 
@@ -173,17 +189,20 @@ def _xml_python(cls, token: str) -> bytes:
 
 
 def build_fmi3(out_dir: Path = DEFAULT_OUT) -> list[Path]:
-    """fmus/fmi3/: the FMI 3.0 plant and controllers, PaperScenario-fmi3.ssp (the SSD of the
-    FMI 2.0 archive, with the FMI 3.0 plant and Co-Simulation controller) and its SSP 2.0 edition
-    PaperScenario-fmi3-ssp2.ssp (the clocked controller, build_ssp2.py)."""
+    """fmus/fmi3/: the FMI 3.0 plant and controllers (arrays/: the array edition),
+    PaperScenario-fmi3.ssp (the SSD of the FMI 2.0 archive, with the FMI 3.0 plant and
+    Co-Simulation controller) and its SSP 2.0 edition PaperScenario-fmi3-ssp2.ssp (the clocked
+    controller, build_ssp2.py)."""
     folder = Path(out_dir) / "fmi3"
     built = [
         build_native_fmu3(FMUS["plant"], folder),
         build_native_fmu3(FMUS["controller"], folder),
         build_native_fmu3(FMUS["controller"], folder, SAMPLE_CLOCK),
     ]
+    built += [build_native_fmu3(FMUS[k], folder / "arrays", arrays=ARRAYS3[k]) for k in ARRAYS3]
     built.append(build_ssp(out_dir, "PaperScenario-fmi3", folder))
     built.append(build_ssp2(out_dir, folder))  # the SSP 2.0 edition (clocked controller)
+    built.append(build_ssp2(out_dir, folder / "arrays", arrays=True))  # array connectors
     try:
         import pythonfmu3  # noqa: F401
     except ImportError:

@@ -63,9 +63,11 @@ def expected_members() -> list[str]:
                for s in ("", *(f"-{name}" for name in SCENARIOS))]  # fmt: skip
     fmi3 = ["PumaPlant", "ImpedanceController", "ImpedanceControllerClocked"] if native else []
     names += [f"fmi3/{n}.fmu" for n in fmi3]
+    names += [f"fmi3/arrays/{n}.fmu" for n in fmi3[:2]]  # the array edition (fmi/fmi3_arrays.py)
     loops = [f"{d}/PaperClosedLoop-{s}.fmu" for d in ("native", "fmi3") for s in SCENARIOS]
     names += loops if native else []  # the closed loop as one FMU (packaging/closedloop.py)
-    fmi3_systems = ["PaperScenario-fmi3.ssp", "PaperScenario-fmi3-ssp2.ssp"] if native else []
+    fmi3_systems = ["PaperScenario-fmi3.ssp", "PaperScenario-fmi3-ssp2.ssp",
+                    "PaperScenario-fmi3-arrays-ssp2.ssp"] if native else []  # fmt: skip
     return names + systems + fmi3_systems
 
 
@@ -153,13 +155,15 @@ lists every variable with unit, range, default and meaning, the equations and th
 
 FMUs (fmus/: the Python flavour, which needs a Python host such as fmpy; fmus/native/: the
 same models in C99, for any FMI host; fmus/fmi3/: the C99 models as FMI 3.0, the controller
-also with its sampling as an FMI 3.0 clock, and fmus/fmi3/python/ the Python ones):
+also with its sampling as an FMI 3.0 clock, fmus/fmi3/arrays/ with the joint vectors as FMI 3.0
+arrays, and fmus/fmi3/python/ the Python ones):
 {fmus}
 Systems (SSP 1.0: the two FMUs wired; each scenario (observer, difference, measured) is a system
 description binding its own parameter set: in PaperScenario*.ssp as SSP variants
 (SystemStructure.ssd = observer, difference.ssd, measured.ssd), and alone in
 PaperScenario*-<scenario>.ssp for engines that read only SystemStructure.ssd;
-PaperScenario-fmi3-ssp2.ssp is the FMI 3.0 system as SSP 2.0, with the clocked controller):
+PaperScenario-fmi3-ssp2.ssp is the FMI 3.0 system as SSP 2.0, with the clocked controller, and
+PaperScenario-fmi3-arrays-ssp2.ssp with the array FMUs wired by array connectors):
 {ssps}
 Reference results (CSV; each FMU's default experiment, and the paper's 20 s closed loop):
 {refs}

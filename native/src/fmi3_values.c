@@ -2,11 +2,15 @@
  * core's (instance_values.c): every variable is a scalar, so nValues must equal the number of
  * value references; Int64 (the enumerations) and fmi3Boolean arrays are converted; the value
  * references past the variable table are FMI 3.0's own: time (VR_TIME, read-only) and the event
- * indicators (read-only locals). Types without variables here: fmi3_stubs.c.
+ * indicators (read-only locals). Types without variables here: fmi3_stubs.c. In the array
+ * edition (FMI3_ARRAYS, fmi3_arrays.c) a Float64 array's value reference stands for its elements.
  */
 #include <stdlib.h>
 
 #include "fmi3_wrapper.h" /* Wrapper, WRAP, FAIL */
+#ifdef FMI3_ARRAYS
+#include "fmi3_arrays.h" /* fmi3_array_slots */
+#endif
 
 /* --- getters and setters ---------------------------------------------------------------------- */
 
@@ -60,24 +64,20 @@ static fmi3Status get_extra(Wrapper *w, fmi3ValueReference vr, double *value)
     return FAIL(w, "value reference %u is not a Float64 variable of this FMU", (unsigned)vr);
 }
 
-fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                          size_t nValueReferences, fmi3Float64 values[], size_t nValues)
+/* fmi3GetFloat64 of nvr scalar variables, the call checked. */
+static fmi3Status get_float64(Wrapper *w, const fmi3ValueReference vr[], size_t nvr,
+                              fmi3Float64 values[])
 {
-    WRAP(fmi3GetFloat64);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetFloat64")) {
-        return fmi3Error;
+    if (!mentions_extra(vr, nvr)) {
+        return status3(instance_get_real(w->inner, (const fmi2ValueReference *)vr, nvr, values));
     }
-    if (!mentions_extra(valueReferences, nValueReferences)) {
-        return status3(instance_get_real(w->inner, (const fmi2ValueReference *)valueReferences,
-                              nValueReferences, values));
-    }
-    for (size_t k = 0; k < nValueReferences; k++) {
+    for (size_t k = 0; k < nvr; k++) {
         fmi3Status s;
-        if (valueReferences[k] >= N_VARS) {
-            s = get_extra(w, valueReferences[k], &values[k]);
+        if (vr[k] >= N_VARS) {
+            s = get_extra(w, vr[k], &values[k]);
         } else {
-            s = status3(instance_get_real(w->inner, (const fmi2ValueReference *)&valueReferences[k], 1,
-                               &values[k]));
+            s = status3(instance_get_real(w->inner, (const fmi2ValueReference *)&vr[k], 1,
+                                          &values[k]));
         }
         if (s != fmi3OK) {
             return s;
@@ -86,25 +86,57 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     return fmi3OK;
 }
 
+/* fmi3SetFloat64 of nvr scalar variables, the call checked. */
+static fmi3Status set_float64(Wrapper *w, const fmi3ValueReference vr[], size_t nvr,
+                              const fmi3Float64 values[])
+{
+    for (size_t k = 0; k < nvr; k++) {
+        if (vr[k] == VR_TIME) {
+            return FAIL(w, "time is the independent variable: it cannot be set (fmi3SetTime "
+                           "does that under Model Exchange)");
+        }
+        if (vr[k] >= N_VARS) {
+            return FAIL(w, "variable %u is computed by the model: it cannot be set",
+                        (unsigned)vr[k]);
+        }
+    }
+    return status3(instance_set_real(w->inner, (const fmi2ValueReference *)vr, nvr, values));
+}
+
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, fmi3Float64 values[], size_t nValues)
+{
+    WRAP(fmi3GetFloat64);
+#ifdef FMI3_ARRAYS /* the arrays' value references become their elements' (checked whole) */
+    fmi3ValueReference *slots = fmi3_array_slots(w, valueReferences, nValueReferences, values,
+                                                 nValues, "fmi3GetFloat64");
+    fmi3Status s = slots ? get_float64(w, slots, nValues, values) : fmi3Error;
+    free(slots);
+    return s;
+#else
+    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetFloat64")) {
+        return fmi3Error;
+    }
+    return get_float64(w, valueReferences, nValueReferences, values);
+#endif
+}
+
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
 {
     WRAP(fmi3SetFloat64);
+#ifdef FMI3_ARRAYS /* the arrays' value references become their elements' (checked whole) */
+    fmi3ValueReference *slots = fmi3_array_slots(w, valueReferences, nValueReferences, values,
+                                                 nValues, "fmi3SetFloat64");
+    fmi3Status s = slots ? set_float64(w, slots, nValues, values) : fmi3Error;
+    free(slots);
+    return s;
+#else
     if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetFloat64")) {
         return fmi3Error;
     }
-    for (size_t k = 0; k < nValueReferences; k++) {
-        if (valueReferences[k] == VR_TIME) {
-            return FAIL(w, "time is the independent variable: it cannot be set (fmi3SetTime "
-                           "does that under Model Exchange)");
-        }
-        if (valueReferences[k] >= N_VARS) {
-            return FAIL(w, "variable %u is computed by the model: it cannot be set",
-                        (unsigned)valueReferences[k]);
-        }
-    }
-    return status3(instance_set_real(w->inner, (const fmi2ValueReference *)valueReferences,
-                          nValueReferences, values));
+    return set_float64(w, valueReferences, nValueReferences, values);
+#endif
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],

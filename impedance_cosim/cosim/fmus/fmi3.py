@@ -6,6 +6,7 @@ FMI 3.0 FMUs alike (the compiled loop steps both; Scheduled Execution needs the 
 from __future__ import annotations
 
 import ctypes
+import math
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,23 @@ def ssp_type(fmi_type: str) -> str:
     """The SSP 1.0 / FMI 2.0 type name of an FMI variable type (Float64 -> Real, Int32 ->
     Integer; FMI 2.0 names and Boolean/String/Enumeration unchanged)."""
     return SSP_TYPES.get(fmi_type, fmi_type)
+
+
+def element_names(v: Any) -> list[str]:
+    """The signals of an FMI variable (fmpy's ModelVariable): its name, or for a fixed-size array
+    q of n elements q[1] .. q[n] (its values in serialization order, row-major)."""
+    dims = getattr(v, "dimensions", None) or []
+    if not dims:
+        return [v.name]
+    if any(d.start is None for d in dims):
+        raise FmuError(f"variable {v.name}: arrays sized by a structural parameter are not supported")
+    return signals(v.name, math.prod(int(d.start) for d in dims))
+
+
+def signals(name: str, size: int) -> list[str]:
+    """The signals of a variable or connector of size elements: name for a scalar (size 1),
+    name[1] .. name[size] for an array."""
+    return [name] if size == 1 else [f"{name}[{k}]" for k in range(1, size + 1)]
 
 
 def is_fmi3(description: Any) -> bool:
@@ -85,19 +103,36 @@ class FmuInstance3(FmuInstance):
         detail = self.error_detail()
         return FmuError(f"{self.name}: {what} ({STATUS[status]}: {detail})")
 
+    def _whole_variables(self, names: list[str]) -> list[int]:
+        """The value references of the variables names are the signals of (element_names): an
+        array's elements must come whole and in order (FMI 3.0 gets and sets arrays whole)."""
+        vrs, i = [], 0
+        while i < len(names):
+            base = names[i].split("[", 1)[0]
+            self.vr(base)  # a clear error for an unknown name
+            elements = element_names(self.variables[base])
+            if names[i : i + len(elements)] != elements:
+                raise FmuError(f"{self.name}: {base} has the elements {elements}: an array is"
+                               " read and written whole, in order")  # fmt: skip
+            vrs.append(self.variables[base].valueReference)
+            i += len(elements)
+        return vrs
+
     def _raw_real(self, function: str, names):
-        vrs = [self.vr(n) for n in names]
-        n = len(vrs)
-        vr_arr = (ctypes.c_uint32 * n)(*vrs)
+        vrs = self._whole_variables(list(names))
+        n = len(names)
+        vr_arr = (ctypes.c_uint32 * len(vrs))(*vrs)
         val_arr = (ctypes.c_double * n)()
         return self.slave._functions[function], self.slave.component, vr_arr, val_arr, n
 
     def real_getter(self, names):
-        """A fast reader of Float64 variables: returns a function returning their values."""
+        """A fast reader of Float64 variables (an array's elements: element_names): returns a
+        function returning their values."""
         fn, comp, vr_arr, val_arr, n = self._raw_real("fmi3GetFloat64", names)
+        nvr = len(vr_arr)
 
         def read() -> list[float]:
-            status = fn(comp, vr_arr, n, val_arr, n)
+            status = fn(comp, vr_arr, nvr, val_arr, n)
             if status > 1:
                 raise self._fail("fmi3GetFloat64 failed", status)
             return list(val_arr)
@@ -105,12 +140,14 @@ class FmuInstance3(FmuInstance):
         return read
 
     def real_setter(self, names):
-        """A fast writer of Float64 variables: returns a function taking the values."""
+        """A fast writer of Float64 variables (an array's elements: element_names): returns a
+        function taking the values."""
         fn, comp, vr_arr, val_arr, n = self._raw_real("fmi3SetFloat64", names)
+        nvr = len(vr_arr)
 
         def write(values) -> None:
             val_arr[:] = values
-            status = fn(comp, vr_arr, n, val_arr, n)
+            status = fn(comp, vr_arr, nvr, val_arr, n)
             if status > 1:
                 raise self._fail("fmi3SetFloat64 failed", status)
 

@@ -96,11 +96,13 @@ FUNCTIONS = {
 
 def unsupported(ordered: list[Any]) -> str | None:
     """Why the compiled loop cannot step these components (None: it can): it calls FMI 2.0 and
-    FMI 3.0 co-simulation FMUs, not FMI 3.0 Scheduled Execution (clocks), with at most MAX_IO
-    inputs and extrapolated outputs each."""
+    FMI 3.0 co-simulation FMUs, not FMI 3.0 Scheduled Execution (clocks) or arrays, with at most
+    MAX_IO inputs and extrapolated outputs each."""
     for s in ordered:
         if is_fmi3(s.fmu.description) and s.fmu.description.coSimulation is None:
             return f"{s.name} is an FMI 3.0 Scheduled Execution FMU (clocks)"
+        if any(getattr(v, "dimensions", None) for v in s.fmu.description.modelVariables):
+            return f"{s.name} has array variables (the Python loop moves them)"
         if len(s.inputs) > MAX_IO:
             return f"{s.name} has {len(s.inputs)} connected inputs (at most {MAX_IO})"
         if len(getattr(s, "rate_index", ())) > MAX_IO:  # outputs extrapolated from

@@ -38,7 +38,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from impedance_cosim.cosim.fmus.fmi2 import FmuError, FmuInstance
-from impedance_cosim.cosim.fmus.fmi3 import open_fmu
+from impedance_cosim.cosim.fmus.fmi3 import open_fmu, signals
 from impedance_cosim.cosim.master import c_loop, realtime
 from impedance_cosim.cosim.master import extrapolation as extra
 from impedance_cosim.cosim.master.options import RunOptions
@@ -274,8 +274,10 @@ class Master:
         index = {s.name: i for i, s in enumerate(ordered)}
         for se, sc, ee, ec in self.system.connections:
             dst = ordered[index[ee]]
-            dst.inputs.append(ec)
-            dst.sources.append((index[se], ordered[index[se]].outputs.index(sc)))
+            size = self.system.component(ee).connectors[ec].size  # SSP 2.0 array connectors
+            for s_el, e_el in zip(signals(sc, size), signals(ec, size), strict=True):
+                dst.inputs.append(e_el)
+                dst.sources.append((index[se], ordered[index[se]].outputs.index(s_el)))
         for s in ordered:
             s.write = s.fmu.real_setter(s.inputs)
 

@@ -13,7 +13,7 @@ from typing import Any
 from controller_model.parameters import VELOCITY_SOURCE
 from impedance_cosim.cosim.fmus.files import FmuArchiveError, FmuError, check_fmu, model_description
 from impedance_cosim.cosim.fmus.fmi2 import fmi_value
-from impedance_cosim.cosim.fmus.fmi3 import ssp_type
+from impedance_cosim.cosim.fmus.fmi3 import element_names, ssp_type
 from impedance_cosim.cosim.ssp.read import SystemDescription
 from impedance_cosim.cosim.ssp.ssp2 import REALS, implementation_problem
 
@@ -40,11 +40,13 @@ def split_name(name: str) -> tuple[str, str]:
 
 
 def real_outputs(description: Any) -> list[str]:
-    """Names of an FMU's Real outputs, in model order (the recorded signals)."""
+    """Names of an FMU's Real outputs, in model order (the recorded signals; an FMI 3.0 array
+    q of n elements as q[1] .. q[n])."""
     return [
-        v.name
+        name
         for v in description.modelVariables
         if v.causality == "output" and ssp_type(v.type) == "Real"
+        for name in element_names(v)
     ]
 
 
@@ -64,6 +66,9 @@ def connector_problems(comp, fmu_vars: Mapping[str, Any], fmu_name: str) -> list
             problems.append(f"{where}: type {v.type} in the FMU, {c.type} in the SSD")
         if c.type in REALS and (v.unit or None) != (c.unit or None):
             problems.append(f"{where}: unit {v.unit} in the FMU, {c.unit} in the SSD")
+        if len(element_names(v)) != c.size:  # SSP 2.0 array connectors
+            problems.append(f"{where}: {len(element_names(v))} elements in the FMU,"
+                            f" {c.size} in the SSD")  # fmt: skip
         fmu_interval = getattr(v, "intervalVariability", None)
         if c.type == "Clock" and c.interval != fmu_interval:  # SSP 2.0 ssc:Clock
             problems.append(f"{where}: intervalVariability {fmu_interval} in the FMU,"

@@ -33,6 +33,7 @@ class Connector:
     unit: str | None
     clocks: tuple[str, ...] = ()  # SSP 2.0: the clocks (connector names) it is associated to
     interval: str | None = None  # SSP 2.0 Clock connectors: the intervalVariability
+    size: int = 1  # SSP 2.0 array connectors: the number of elements (1: a scalar)
 
 
 @dataclass
@@ -177,8 +178,21 @@ def connectors(element: ET.Element, what: str) -> dict[str, Connector]:
         clocks = tuple(required(k, "name", f"{what}: connector {name!r}")
                        for k in c.findall("ssd:Clock", NS))  # fmt: skip
         out[name] = Connector(name, kind, _local(t.tag) if t is not None else "Real", unit, clocks,
-                              t.get("intervalVariability") if t is not None else None)  # fmt: skip
+                              t.get("intervalVariability") if t is not None else None,
+                              _size(c, f"{what}: connector {name!r}"))  # fmt: skip
     return out
+
+
+def _size(connector: ET.Element, what: str) -> int:
+    """The number of elements of an SSP 2.0 array connector (ssc:Dimension), 1 for a scalar:
+    one dimension of fixed size is read, the others are refused."""
+    dims = connector.findall("ssc:Dimension", NS)
+    if not dims:
+        return 1
+    size = dims[0].get("size")
+    if len(dims) > 1 or size is None or not size.isdigit() or int(size) < 1:
+        raise SspError(f"{what}: only one ssc:Dimension with a fixed size >= 1 is supported")
+    return int(size)
 
 
 def _parameter_set(
@@ -329,6 +343,8 @@ def check_connections(desc: SystemDescription, where: str) -> None:
             raise SspError(f"{here}: type {start.type} != {end.type}")
         if start.unit != end.unit:
             raise SspError(f"{here}: unit mismatch ({start.unit} -> {end.unit})")
+        if start.size != end.size:
+            raise SspError(f"{here}: {start.size} elements -> {end.size} (array connectors)")
         if (ee, ec) in fed:
             raise SspError(f"{here}: input {ee}.{ec} is fed twice")
         fed.add((ee, ec))

@@ -12,6 +12,8 @@ what 2.0 can say and 1.0 cannot.
   (application/x-srmd-meta-data, SSP Traceability's SimulationResourceMetaData).
 The connections, scenarios, parameter values, default experiment and master annotation are those
 of system.py: both editions describe the same system and give the same rows.
+The array edition (ARRAYS2, issue 37) wires the FMI 3.0 array FMUs (fmus/fmi3/arrays/,
+Co-Simulation, no clock) with array connectors (ssc:Dimension size="3") for q, ft and tau.
 """
 
 from __future__ import annotations
@@ -19,11 +21,12 @@ from __future__ import annotations
 import hashlib
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from impedance_cosim.cosim.system.paper import (
     COMPONENTS,
+    CONNECTIONS,
     META,
     NS,
     SCENARIO_DESCRIPTIONS,
@@ -33,12 +36,12 @@ from impedance_cosim.cosim.system.paper import (
     _literal,
     _units,
     bound_parameters,
-    connections_element,
     experiment_element,
     parameter_set_xml,
     ssd_name,
     ssv_name,
 )
+from impedance_cosim.fmi.fmi3_arrays import ARRAYS3, Fmi3Array
 from impedance_cosim.fmi.variables import Variable
 from impedance_cosim.version import __version__
 
@@ -74,6 +77,43 @@ COMPONENTS2 = {
 }
 
 
+@dataclass(frozen=True)
+class Edition2:
+    """One SSP 2.0 archive: its components' FMUs and, per component, the FMU's array variables
+    (their elements' connectors become one array connector)."""
+
+    components: dict[str, Component2]
+    arrays: dict[str, tuple[Fmi3Array, ...]] = field(default_factory=dict)
+
+    @property
+    def clocked(self) -> bool:
+        return any(c.clocked for c in self.components.values())
+
+    def connections(self) -> list[tuple[str, str, str, str]]:
+        """CONNECTIONS, those between elements k of two arrays as one between the arrays."""
+        out = []
+        for se, sc, ee, ec in CONNECTIONS:
+            ends = (_array_of(self.arrays.get(se, ()), sc), _array_of(self.arrays.get(ee, ()), ec))
+            conn = (se, ends[0].name, ee, ends[1].name) if all(ends) else (se, sc, ee, ec)
+            if conn not in out:
+                out.append(conn)
+        return out
+
+
+CLOCKED2 = Edition2(COMPONENTS2)  # PaperScenario-fmi3-ssp2.ssp
+ARRAYS2 = Edition2(  # PaperScenario-fmi3-arrays-ssp2.ssp: the FMUs of fmus/fmi3/arrays/
+    {
+        "controller": Component2("controller", "ImpedanceController.fmu", "CoSimulation"),
+        "plant": Component2("plant", "PumaPlant.fmu", "CoSimulation"),
+    },
+    ARRAYS3,
+)
+
+
+def _array_of(arrays: tuple[Fmi3Array, ...], name: str) -> Fmi3Array | None:
+    return next((a for a in arrays if name in a.elements), None)
+
+
 def _q(prefix: str, tag: str) -> str:
     return f"{{{NS[prefix]}}}{tag}"
 
@@ -95,9 +135,11 @@ def sha3(data: bytes) -> str:
     return hashlib.sha3_256(data).hexdigest()
 
 
-def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes:
+def ssd2_xml(
+    scenario: str, checksums: Mapping[str, str] | None = None, edition: Edition2 = CLOCKED2
+) -> bytes:
     """The SSP 2.0 system description of one scenario (checksums: component -> SHA3-256 of its
-    FMU, written as SRMD meta data when given)."""
+    FMU, written as SRMD meta data when given) in one edition (the clocked one by default)."""
     root = ET.Element(
         _q("ssd", "SystemStructureDescription"),
         {
@@ -112,43 +154,55 @@ def ssd2_xml(scenario: str, checksums: Mapping[str, str] | None = None) -> bytes
         _q("ssd", "System"),
         {
             "name": SYSTEM_NAME,
-            "description": "PUMA-subset plant + observer/impedance controller"
-            " (FMI 3.0; the controller sampled by its clock)",
+            "description": "PUMA-subset plant + observer/impedance controller (FMI 3.0; "
+            + ("the controller sampled by its clock)" if edition.clocked else "array connectors)"),
         },
     )
-    outer = ET.SubElement(system, _q("ssd", "Connectors"))
-    c = ET.SubElement(
-        outer,
-        _q("ssd", "Connector"),
-        {
-            "name": CLOCK,
-            "kind": "output",
-            "description": "The controller's sample clock (periodic, 400 Hz)",
-        },
-    )
-    _clock_type(c)
+    if edition.clocked:
+        outer = ET.SubElement(system, _q("ssd", "Connectors"))
+        c = ET.SubElement(
+            outer,
+            _q("ssd", "Connector"),
+            {
+                "name": CLOCK,
+                "kind": "output",
+                "description": "The controller's sample clock (periodic, 400 Hz)",
+            },
+        )
+        _clock_type(c)
     elements = ET.SubElement(system, _q("ssd", "Elements"))
     used_units: set[str] = set()
     for comp in sorted(COMPONENTS, key=lambda c: SSD_ELEMENT_ORDER.index(c.name)):
-        el = _component(elements, comp, scenario, used_units)
+        el = _component(elements, comp, scenario, used_units, edition)
         if checksums:
-            _srmd(el, comp.name, COMPONENTS2[comp.name], checksums[comp.name])
-    connections = connections_element(system)
-    ET.SubElement(
-        connections,
-        _q("ssd", "Connection"),
-        {"startElement": "controller", "startConnector": CLOCK, "endConnector": CLOCK},
-    )
+            _srmd(el, comp.name, edition.components[comp.name], checksums[comp.name])
+    connections = ET.SubElement(system, _q("ssd", "Connections"))
+    for se, sc, ee, ec in edition.connections():
+        ET.SubElement(
+            connections,
+            _q("ssd", "Connection"),
+            {"startElement": se, "startConnector": sc, "endElement": ee, "endConnector": ec},
+        )
+    if edition.clocked:
+        ET.SubElement(
+            connections,
+            _q("ssd", "Connection"),
+            {"startElement": "controller", "startConnector": CLOCK, "endConnector": CLOCK},
+        )
     _units(root, "ssd", used_units)
     experiment_element(root)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
-def _component(elements: ET.Element, comp, scenario: str, used_units: set[str]) -> ET.Element:
-    """One Component element: its connectors (the clock's too when it is clocked) and its
-    parameter binding to the scenario's SSV; the Real units it uses are added to used_units."""
-    spec = COMPONENTS2[comp.name]
+def _component(
+    elements: ET.Element, comp, scenario: str, used_units: set[str], edition: Edition2
+) -> ET.Element:
+    """One Component element: its connectors (the clock's too when it is clocked; an array's
+    elements as one array connector) and its parameter binding to the scenario's SSV; the Real
+    units it uses are added to used_units."""
+    spec = edition.components[comp.name]
+    arrays = edition.arrays.get(comp.name, ())
     el = ET.SubElement(
         elements,
         _q("ssd", "Component"),
@@ -161,8 +215,15 @@ def _component(elements: ET.Element, comp, scenario: str, used_units: set[str]) 
     )
     connectors = ET.SubElement(el, _q("ssd", "Connectors"))
     params = bound_parameters(comp.name)
-    for v in comp.model_class.variables():
-        if v.causality == "parameter" and v.name not in params:
+    variables = comp.model_class.variables()
+    for v in variables:
+        array = _array_of(arrays, v.name)
+        if (v.causality == "parameter" and v.name not in params) or (
+            array and v.name != array.elements[0]
+        ):
+            continue
+        if array:
+            _array_connector(connectors, array, [u for u in variables if u.name in array.elements])
             continue
         c = ET.SubElement(
             connectors,
@@ -194,6 +255,20 @@ def _component(elements: ET.Element, comp, scenario: str, used_units: set[str]) 
     return el
 
 
+def _array_connector(connectors: ET.Element, array: Fmi3Array, elements: list[Variable]) -> None:
+    """An array connector: Float64 (with the unit its elements share, if any), one ssc:Dimension
+    of fixed size, as the array FMU declares the variable (fmi/fmi3_arrays.py)."""
+    kind = elements[0].causality
+    c = ET.SubElement(
+        connectors,
+        _q("ssd", "Connector"),
+        {"name": array.name, "kind": kind, "description": array.description},
+    )
+    units = {v.unit for v in elements}
+    ET.SubElement(c, _q("ssc", "Float64"), {"unit": units.pop()} if len(units) == 1 else {})
+    ET.SubElement(c, _q("ssc", "Dimension"), {"size": str(len(elements))})
+
+
 def _clock_type(connector: ET.Element) -> None:
     """The clock as the FMU declares it: periodic with a fixed interval (the FMU's parameter
     sample_period, which it reports after initialization), priority 0."""
@@ -222,15 +297,15 @@ def ssv2_xml(scenario: str, component: str) -> bytes:
     return parameter_set_xml(scenario, component, {"version": VERSION, **META2}, _typed)
 
 
-def archive_files(fmus: Mapping[str, bytes]) -> dict[str, bytes]:
-    """Every member of the 2.0 archive (path -> content): the three scenarios as variants
-    (SystemStructure.ssd the default), their parameter sets, and the FMUs (component -> FMU
-    bytes), each SSD carrying the FMUs' checksums."""
+def archive_files(fmus: Mapping[str, bytes], edition: Edition2 = CLOCKED2) -> dict[str, bytes]:
+    """Every member of the 2.0 archive of an edition (path -> content): the three scenarios as
+    variants (SystemStructure.ssd the default), their parameter sets, and the FMUs (component ->
+    FMU bytes), each SSD carrying the FMUs' checksums."""
     checksums = {name: sha3(data) for name, data in fmus.items()}
-    files = {ssd_name(s): ssd2_xml(s, checksums) for s in SCENARIOS}
+    files = {ssd_name(s): ssd2_xml(s, checksums, edition) for s in SCENARIOS}
     for s in SCENARIOS:
         for comp in COMPONENTS:
             files[f"resources/{ssv_name(s, comp.name)}"] = ssv2_xml(s, comp.name)
     for name, data in fmus.items():
-        files[COMPONENTS2[name].source] = data
+        files[edition.components[name].source] = data
     return files

@@ -103,183 +103,125 @@ static fmi3Status set_float64(Wrapper *w, const fmi3ValueReference vr[], size_t 
     return status3(instance_set_real(w->inner, (const fmi2ValueReference *)vr, nvr, values));
 }
 
+/* fmi3Get/SetFloat64 (set: values are the setter's, read only) over the scalar variables; in the
+ * array edition the arrays' value references become their elements' first (checked whole). */
+static fmi3Status float64_call(Wrapper *w, const fmi3ValueReference vr[], size_t nvr,
+                               fmi3Float64 values[], size_t nValues, int set,
+                               const char *function)
+{
+#ifdef FMI3_ARRAYS
+    fmi3ValueReference *slots = fmi3_array_slots(w, vr, nvr, values, nValues, function);
+    fmi3Status s = !slots ? fmi3Error
+                   : set  ? set_float64(w, slots, nValues, values)
+                          : get_float64(w, slots, nValues, values);
+    free(slots);
+    return s;
+#else
+    if (!well_formed(w, vr, nvr, values, nValues, function)) {
+        return fmi3Error;
+    }
+    return set ? set_float64(w, vr, nvr, values) : get_float64(w, vr, nvr, values);
+#endif
+}
+
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues)
 {
     WRAP(fmi3GetFloat64);
-#ifdef FMI3_ARRAYS /* the arrays' value references become their elements' (checked whole) */
-    fmi3ValueReference *slots = fmi3_array_slots(w, valueReferences, nValueReferences, values,
-                                                 nValues, "fmi3GetFloat64");
-    fmi3Status s = slots ? get_float64(w, slots, nValues, values) : fmi3Error;
-    free(slots);
-    return s;
-#else
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetFloat64")) {
-        return fmi3Error;
-    }
-    return get_float64(w, valueReferences, nValueReferences, values);
-#endif
+    return float64_call(w, valueReferences, nValueReferences, values, nValues, 0,
+                        "fmi3GetFloat64");
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
 {
     WRAP(fmi3SetFloat64);
-#ifdef FMI3_ARRAYS /* the arrays' value references become their elements' (checked whole) */
-    fmi3ValueReference *slots = fmi3_array_slots(w, valueReferences, nValueReferences, values,
-                                                 nValues, "fmi3SetFloat64");
-    fmi3Status s = slots ? set_float64(w, slots, nValues, values) : fmi3Error;
-    free(slots);
-    return s;
-#else
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetFloat64")) {
-        return fmi3Error;
-    }
-    return set_float64(w, valueReferences, nValueReferences, values);
-#endif
+    return float64_call(w, valueReferences, nValueReferences, (fmi3Float64 *)values, nValues, 1,
+                        "fmi3SetFloat64");
 }
 
-fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Int32 values[], size_t nValues)
-{
-    WRAP(fmi3GetInt32);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt32")) {
-        return fmi3Error;
-    }
-    return status3(instance_get_integer(w->inner, (const fmi2ValueReference *)valueReferences,
-                             nValueReferences, (fmi2Integer *)values));
-}
+/* The FMI 3 types the core stores as int (Int32, Int64: the enumerations, Boolean) or as text. */
+typedef enum { F_INT32, F_INT64, F_BOOLEAN, F_STRING } Form;
 
-fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Int32 values[], size_t nValues)
+/* The getters but Float64: the core's values of the form, converted element by element. */
+static fmi3Status get_values(Wrapper *w, const fmi3ValueReference vr[], size_t nvr, void *values,
+                             Form form)
 {
-    WRAP(fmi3SetInt32);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt32")) {
-        return fmi3Error;
-    }
-    return status3(instance_set_integer(w->inner, (const fmi2ValueReference *)valueReferences,
-                             nValueReferences, (const fmi2Integer *)values));
-}
-
-/* Enumerations are read and written as Int64 in FMI 3.0; the model stores them as integers. */
-fmi3Status fmi3GetInt64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Int64 values[], size_t nValues)
-{
-    fmi2Integer buf[64];
-    WRAP(fmi3GetInt64);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetInt64")) {
-        return fmi3Error;
-    }
-    for (size_t k = 0; k < nValueReferences; k += 64) {
-        size_t n = nValueReferences - k < 64 ? nValueReferences - k : 64;
-        fmi2Status s = instance_get_integer(w->inner, (const fmi2ValueReference *)valueReferences + k,
-                                      n, buf);
-        if (s != fmi2OK) {
-            return status3(s);
-        }
-        for (size_t j = 0; j < n; j++) {
-            values[k + j] = buf[j];
-        }
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetInt64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Int64 values[], size_t nValues)
-{
+    const fmi2ValueReference *vr2 = (const fmi2ValueReference *)vr;
     fmi2Integer *buf;
     fmi2Status s;
-    WRAP(fmi3SetInt64);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetInt64")) {
-        return fmi3Error;
+    if (form == F_STRING) {
+        return status3(instance_get_string(w->inner, vr2, nvr, (fmi2String *)values));
     }
-    if (nValueReferences == 0) {
-        return fmi3OK;
-    }
-    for (size_t k = 0; k < nValueReferences; k++) {
-        if (values[k] < -2147483647 - 1 || values[k] > 2147483647) {
-            return FAIL(w, "fmi3SetInt64: value %lld is beyond the 32-bit range of this FMU",
-                        (long long)values[k]);
-        }
-    }
-    buf = (fmi2Integer *)malloc(nValueReferences * sizeof *buf);
+    buf = (fmi2Integer *)malloc((nvr ? nvr : 1) * sizeof *buf);
     if (!buf) {
         return FAIL(w, "out of memory");
     }
-    for (size_t k = 0; k < nValueReferences; k++) {
-        buf[k] = (fmi2Integer)values[k];
+    s = form == F_BOOLEAN ? instance_get_boolean(w->inner, vr2, nvr, buf)
+                          : instance_get_integer(w->inner, vr2, nvr, buf);
+    for (size_t k = 0; s == fmi2OK && k < nvr; k++) {
+        if (form == F_INT32) {
+            ((fmi3Int32 *)values)[k] = buf[k];
+        } else if (form == F_INT64) {
+            ((fmi3Int64 *)values)[k] = buf[k];
+        } else {
+            ((fmi3Boolean *)values)[k] = buf[k] != fmi2False;
+        }
     }
-    s = instance_set_integer(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
-                       buf);
     free(buf);
     return status3(s);
 }
 
-fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                          size_t nValueReferences, fmi3Boolean values[], size_t nValues)
+/* The setters but Float64: the values converted to the core's form (an Int64 beyond the model's
+ * 32 bits refused), then set together. */
+static fmi3Status set_values(Wrapper *w, const fmi3ValueReference vr[], size_t nvr,
+                             const void *values, Form form)
 {
-    fmi2Boolean buf[64];
-    WRAP(fmi3GetBoolean);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetBoolean")) {
-        return fmi3Error;
-    }
-    for (size_t k = 0; k < nValueReferences; k += 64) {
-        size_t n = nValueReferences - k < 64 ? nValueReferences - k : 64;
-        fmi2Status s = instance_get_boolean(w->inner, (const fmi2ValueReference *)valueReferences + k,
-                                      n, buf);
-        if (s != fmi2OK) {
-            return status3(s);
-        }
-        for (size_t j = 0; j < n; j++) {
-            values[k + j] = buf[j] != fmi2False;
-        }
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                          size_t nValueReferences, const fmi3Boolean values[], size_t nValues)
-{
-    fmi2Boolean *buf;
+    const fmi2ValueReference *vr2 = (const fmi2ValueReference *)vr;
+    fmi2Integer *buf;
     fmi2Status s;
-    WRAP(fmi3SetBoolean);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetBoolean")) {
-        return fmi3Error;
+    if (form == F_STRING) {
+        return status3(instance_set_string(w->inner, vr2, nvr, (const fmi2String *)values));
     }
-    if (nValueReferences == 0) {
-        return fmi3OK;
+    for (size_t k = 0; form == F_INT64 && k < nvr; k++) {
+        const fmi3Int64 v = ((const fmi3Int64 *)values)[k];
+        if (v < -2147483647 - 1 || v > 2147483647) {
+            return FAIL(w, "fmi3SetInt64: value %lld is beyond the 32-bit range of this FMU",
+                        (long long)v);
+        }
     }
-    buf = (fmi2Boolean *)malloc(nValueReferences * sizeof *buf);
+    buf = (fmi2Integer *)malloc((nvr ? nvr : 1) * sizeof *buf);
     if (!buf) {
         return FAIL(w, "out of memory");
     }
-    for (size_t k = 0; k < nValueReferences; k++) {
-        buf[k] = values[k] ? fmi2True : fmi2False;
+    for (size_t k = 0; k < nvr; k++) {
+        buf[k] = form == F_INT32   ? ((const fmi3Int32 *)values)[k]
+                 : form == F_INT64 ? (fmi2Integer)((const fmi3Int64 *)values)[k]
+                                   : (((const fmi3Boolean *)values)[k] ? fmi2True : fmi2False);
     }
-    s = instance_set_boolean(w->inner, (const fmi2ValueReference *)valueReferences, nValueReferences,
-                       buf);
+    s = form == F_BOOLEAN ? instance_set_boolean(w->inner, vr2, nvr, buf)
+                          : instance_set_integer(w->inner, vr2, nvr, buf);
     free(buf);
     return status3(s);
 }
 
-fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                         size_t nValueReferences, fmi3String values[], size_t nValues)
-{
-    WRAP(fmi3GetString);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3GetString")) {
-        return fmi3Error;
+/* The getters and setters but Float64, one line each: legal, well formed, then the core's. */
+#define VALUES3(function, ctype, access, form)                                                     \
+    fmi3Status function(fmi3Instance instance, const fmi3ValueReference valueReferences[],     \
+                        size_t nValueReferences, ctype values[], size_t nValues)               \
+    {                                                                                          \
+        WRAP(function);                                                                        \
+        if (!well_formed(w, valueReferences, nValueReferences, values, nValues, #function)) {  \
+            return fmi3Error;                                                                  \
+        }                                                                                      \
+        return access(w, valueReferences, nValueReferences, values, form);                     \
     }
-    return status3(instance_get_string(w->inner, (const fmi2ValueReference *)valueReferences,
-                            nValueReferences, values));
-}
 
-fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                         size_t nValueReferences, const fmi3String values[], size_t nValues)
-{
-    WRAP(fmi3SetString);
-    if (!well_formed(w, valueReferences, nValueReferences, values, nValues, "fmi3SetString")) {
-        return fmi3Error;
-    }
-    return status3(instance_set_string(w->inner, (const fmi2ValueReference *)valueReferences,
-                            nValueReferences, values));
-}
+VALUES3(fmi3GetInt32, fmi3Int32, get_values, F_INT32)
+VALUES3(fmi3SetInt32, const fmi3Int32, set_values, F_INT32)
+VALUES3(fmi3GetInt64, fmi3Int64, get_values, F_INT64) /* the enumerations */
+VALUES3(fmi3SetInt64, const fmi3Int64, set_values, F_INT64)
+VALUES3(fmi3GetBoolean, fmi3Boolean, get_values, F_BOOLEAN)
+VALUES3(fmi3SetBoolean, const fmi3Boolean, set_values, F_BOOLEAN)
+VALUES3(fmi3GetString, fmi3String, get_values, F_STRING)
+VALUES3(fmi3SetString, const fmi3String, set_values, F_STRING)

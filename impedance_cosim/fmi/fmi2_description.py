@@ -14,7 +14,7 @@ from impedance_cosim.fmi.variables import (
     ModelExchange,
     Partials,
     Variable,
-    derivative_variables,
+    full_table,
 )
 
 LOG_CATEGORIES = {
@@ -47,24 +47,11 @@ def model_description(
     Model Exchange the outputs then depend on the continuous states only. SAMPLED_INPUTS: every
     output depends on every input, but only at sample instants (dependenciesKind "discrete").
     naming: the variableNamingConvention ("structured" for names like plant.q1: the closed loop)."""
-    if model_exchange:
-        variables = [*variables, *derivative_variables(variables, model_exchange)]
+    variables = full_table(variables, model_exchange)
     index = {v.name: i + 1 for i, v in enumerate(variables)}
-    root = ET.Element(
-        "fmiModelDescription",
-        {
-            "fmiVersion": "2.0",
-            "modelName": model_name,
-            "guid": guid,
-            "description": description,
-            **METADATA,
-            "generationTool": generation_tool,
-            "variableNamingConvention": naming,
-            "numberOfEventIndicators": str(
-                model_exchange.event_indicators if model_exchange else 0
-            ),
-        },
-    )
+    n_indicators = model_exchange.event_indicators if model_exchange else 0
+    root = description_root(("2.0", "guid", guid), model_name, description, generation_tool,
+                            naming, numberOfEventIndicators=str(n_indicators))  # fmt: skip
     partials = _interfaces(root, model_name, needs_execution_tool, model_exchange, source_files)
     used = sorted({v.unit for v in variables if v.unit})
     unknown = [u for u in used if u not in QUANTITIES]
@@ -72,14 +59,57 @@ def model_description(
         raise ValueError(f"units {unknown} have no quantity in QUANTITIES")
     add_unit_definitions(root, used)
     _type_definitions(root, used, variables)
-    cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(cats, "Category", {"name": name, "description": text})
+    add_log_categories(root, "fmi2")
     ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
     _model_variables(root, variables, index)
     _model_structure(root, variables, index, output_dependencies, model_exchange, partials)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def description_root(
+    identity: tuple[str, str, str],
+    model_name: str,
+    description: str,
+    generation_tool: str,
+    naming: str,
+    **extra: str,
+) -> ET.Element:
+    """The fmiModelDescription element of either version: identity is (fmiVersion, the name of
+    its identifying attribute: guid or instantiationToken, its value)."""
+    version, key, value = identity
+    return ET.Element(
+        "fmiModelDescription",
+        {
+            "fmiVersion": version,
+            "modelName": model_name,
+            key: value,
+            "description": description,
+            **METADATA,
+            "generationTool": generation_tool,
+            "variableNamingConvention": naming,
+            **extra,
+        },
+    )
+
+
+def add_log_categories(root: ET.Element, prefix: str) -> None:
+    """The LogCategories, their statuses named as the version's (prefix fmi2 or fmi3) are."""
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        description = text.replace("fmi2", prefix)
+        ET.SubElement(cats, "Category", {"name": name, "description": description})
+
+
+def variable_attributes(v: Variable, vr: int) -> dict[str, str]:
+    """The attributes every variable element of either version starts with."""
+    return {
+        "name": v.name,
+        "valueReference": str(vr),
+        "description": v.description,
+        "causality": v.causality,
+        "variability": v.fmi_variability,
+    }
 
 
 def _interfaces(
@@ -135,13 +165,7 @@ def _model_variables(root: ET.Element, variables: list[Variable], index: dict[st
     """ModelVariables: one ScalarVariable per variable, value reference = its position."""
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(variables):
-        attrs = {
-            "name": v.name,
-            "valueReference": str(vr),
-            "description": v.description,
-            "causality": v.causality,
-            "variability": v.fmi_variability,
-        }
+        attrs = variable_attributes(v, vr)
         if v.causality in ("output", "local"):
             attrs["initial"] = "calculated"
         sv = ET.SubElement(mv, "ScalarVariable", attrs)

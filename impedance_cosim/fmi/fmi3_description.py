@@ -10,19 +10,20 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 from impedance_cosim.fmi.fmi2_description import (
-    LOG_CATEGORIES,
+    add_log_categories,
     add_unit_and_range,
+    description_root,
     exact_dependencies,
+    variable_attributes,
     xml_value,
 )
 from impedance_cosim.fmi.units import DISPLAY_UNITS, QUANTITIES, add_unit_definitions
 from impedance_cosim.fmi.variables import (
-    METADATA,
     SAMPLED_INPUTS,
     ModelExchange,
     Partials,
     Variable,
-    derivative_variables,
+    full_table,
 )
 
 FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
@@ -55,13 +56,6 @@ def extras(n_table: int, model_exchange: ModelExchange | None, clock: SampleCloc
     return Extras(n_table, indicators, n_table + 1 + n_ind if clock else None)
 
 
-def full_table(variables: list[Variable], model_exchange: ModelExchange | None) -> list[Variable]:
-    """The table as both glues number it: the model's variables, then der(<state>) locals."""
-    if model_exchange:
-        return [*variables, *derivative_variables(variables, model_exchange)]
-    return list(variables)
-
-
 def model_description3(
     model_name: str,
     description: str,
@@ -89,25 +83,13 @@ def model_description3(
     table = full_table(variables, model_exchange)
     ext = extras(len(table), model_exchange, clock or cs_clock)
     vr_of = {v.name: vr for vr, v in enumerate(table)}
-    root = ET.Element(
-        "fmiModelDescription",
-        {
-            "fmiVersion": "3.0",
-            "modelName": model_name,
-            "instantiationToken": token,
-            "description": description,
-            **METADATA,
-            "generationTool": generation_tool,
-            "variableNamingConvention": naming,
-        },
-    )
+    root = description_root(("3.0", "instantiationToken", token), model_name, description,
+                            generation_tool, naming)  # fmt: skip
     partials = _interfaces3(root, model_name, model_exchange, clock, early_return, cs_clock)
     used = sorted({v.unit for v in table if v.unit} | {"s"})
     add_unit_definitions(root, used)
     _type_definitions(root, [u for u in used if u in QUANTITIES], table)
-    cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
+    add_log_categories(root, "fmi3")
     ET.SubElement(root, "DefaultExperiment", {k: repr(v) for k, v in default_experiment.items()})
     mv = ET.SubElement(root, "ModelVariables")
     ET.SubElement(
@@ -194,13 +176,7 @@ def _variable3(
 ) -> None:
     """One variable of the table as its FMI 3.0 type element (clock: the clock's value
     reference, which clocks the inputs and outputs)."""
-    attrs = {
-        "name": v.name,
-        "valueReference": str(vr),
-        "description": v.description,
-        "causality": v.causality,
-        "variability": v.fmi_variability,
-    }
+    attrs = variable_attributes(v, vr)
     if clock is not None and v.causality in ("input", "output"):
         attrs.update(clocks=str(clock), variability="discrete")
     if v.causality in ("output", "local"):

@@ -115,6 +115,14 @@ class Partials:
 PER_SECOND = {"rad": "rad/s", "rad/s": "rad/s2", "m": "m/s", "m/s": "m/s2"}
 
 
+def full_table(variables: list[Variable], model_exchange: ModelExchange | None) -> list[Variable]:
+    """The table as the modelDescription and both glues number it: the model's variables, then
+    (Model Exchange) the der(<state>) locals."""
+    if model_exchange:
+        return [*variables, *derivative_variables(variables, model_exchange)]
+    return list(variables)
+
+
 def derivative_variables(variables: list[Variable], me: ModelExchange) -> list[Variable]:
     """The state derivatives der(<state>), appended to a table for Model Exchange (locals)."""
     table = {v.name: v for v in variables}

@@ -25,12 +25,8 @@ import zipfile
 from pathlib import Path
 
 from impedance_cosim.fmi.fmi3_arrays import ARRAYS3, Fmi3Array, array_description3, c_arrays3
-from impedance_cosim.fmi.fmi3_description import (
-    SampleClock,
-    c_config3,
-    full_table,
-    model_description3,
-)
+from impedance_cosim.fmi.fmi3_description import SampleClock, c_config3, model_description3
+from impedance_cosim.fmi.variables import full_table
 from impedance_cosim.packaging.archive_out import write_zip
 from impedance_cosim.packaging.build import (
     DEFAULT_OUT,

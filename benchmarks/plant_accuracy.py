@@ -12,8 +12,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from plant_reference import reference_states
 
-from impedance_cosim.apps.reference import reference_states
 from impedance_cosim.cosim.master.plain_loop import run_models
 from plant_model.model import PlantModel
 

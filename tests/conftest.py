@@ -88,6 +88,22 @@ def native_ssp(native_dir: Path) -> Path:
     return native_dir.parent / "PaperScenario-native.ssp"
 
 
+def benchmark_module(name: str):
+    """benchmarks/<name>.py loaded as a module: tests that use what a benchmark script computes
+    (its reference solution, its host loop) import it so, the script staying runnable alone."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "benchmarks" / f"{name}.py")
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    sys.path.insert(0, str(REPO / "benchmarks"))  # its own imports of its neighbours
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+    return module
+
+
 def output_dict(model) -> dict[str, float]:
     """A model's outputs by name."""
     names = [v.name for v in model.variables() if v.causality == "output"]

@@ -7,13 +7,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import DT, contact_torques, output_dict
+from conftest import DT, benchmark_module, contact_torques, output_dict
 
-from impedance_cosim.apps.reference import reference_states
 from impedance_cosim.fmi.model import ModelError
 from impedance_cosim.physics.wall import WallParams, wall_force
 from plant_model.model import PlantModel
 
+reference_states = benchmark_module("plant_reference").reference_states  # scipy's DOP853
 NO_FRICTION = {"f1": 0.0, "f2": 0.0, "f3": 0.0}
 
 

@@ -2,7 +2,7 @@
 
 scipy's DOP853 (rtol 1e-10 by default) integrates eq. (1) with the clamped wall law and scipy's
 own event location, one torque-hold interval at a time. Used to measure the plant FMU's accuracy
-(tests and benchmarks/plant_accuracy.py).
+(benchmarks/plant_accuracy.py and tests/test_plant.py, which loads this file).
 """
 
 from __future__ import annotations

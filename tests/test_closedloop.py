@@ -6,7 +6,6 @@ Checker."""
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import re
 import shutil
@@ -16,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import benchmark_module
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
@@ -33,12 +33,9 @@ from plant_model.model import PlantModel
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 
 H = 1 / 400
-SPEED = Path(__file__).resolve().parent.parent / "benchmarks" / "closedloop_speed.py"
-spec = importlib.util.spec_from_file_location("closedloop_speed", SPEED)
-assert spec and spec.loader
-closedloop_speed = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(closedloop_speed)
-run_alone = closedloop_speed.run_alone  # the FMU stepped alone, rows of names at each t_i
+run_alone = benchmark_module(
+    "closedloop_speed"
+).run_alone  # the FMU stepped alone, rows of names at each t_i
 FLOOR = 1e-9  # the issue's bound; measured: 0.0 on every output (difference 0)
 N_OUTPUTS = sum(
     v.causality == "output" for m in (PlantModel, ControllerModel) for v in m.variables()

@@ -3,21 +3,17 @@ errors (a whole two-commit comparison is left to the script itself, docs/develop
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from conftest import benchmark_module
 
 pytestmark = pytest.mark.slow
 
-SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "outputs_equal.py"
-spec = importlib.util.spec_from_file_location("outputs_equal", SCRIPT)
-assert spec and spec.loader
-oe = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(oe)
+oe = benchmark_module("outputs_equal")
 
 
 def write(folder: Path, files: dict[str, str]) -> Path:
@@ -108,7 +104,7 @@ def test_verdicts() -> None:
 )
 def test_bad_arguments_are_one_line_and_exit_status_2(args: list[str], message: str) -> None:
     done = subprocess.run(
-        [sys.executable, str(SCRIPT), *args], capture_output=True, text=True, timeout=60
+        [sys.executable, oe.__file__, *args], capture_output=True, text=True, timeout=60
     )
     assert done.returncode == 2
     assert done.stdout == ""

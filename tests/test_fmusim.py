@@ -1,9 +1,11 @@
-"""The FMI 3.0 plant under a third-party host: the Reference FMUs' fmusim (0.0.39, the last
+"""The FMI 3.0 plant and controller under a third-party host: the Reference FMUs' fmusim (0.0.39, the last
 release with it), built from its sources and named by IMPCOSIM_FMUSIM (skipped otherwise: it is
 not on PyPI or in Debian; docs/fmi3.md says how to build it). fmusim drives the plant alone with
 the torques of our `run --event-exact` closed loop, held over each step as our master holds them;
 with its event mode, early return and intermediate values on it must stop at the contact switch
-our run found, and on the grid both runs must agree with ours."""
+our run found, and on the grid both runs must agree with ours. The controller alone must take
+every sample of its clock in fmusim's Co-Simulation (with and without event mode) and Model
+Exchange as in fmpy's host."""
 
 from __future__ import annotations
 
@@ -80,3 +82,81 @@ def test_fmusim_runs_the_fmi3_plant_as_our_event_exact_run(fmi3_dir, ours, tmp_p
         assert len(off_grid) == 1 and abs(off_grid[0] - event) <= 1e-9, (off_grid, event)
     else:
         assert off_grid == []
+
+
+# --- the FMI 3.0 controller: its clock's ticks in fmusim's Co-Simulation and Model Exchange ---
+
+T_CTRL = 0.5  # 200 ticks; the inputs stay at their start values, so every host samples alike
+
+
+def controller_reference(fmi3_dir: Path) -> np.ndarray:
+    """tau1..3 after the sample at each tick t_k = k/400 (row k), from fmpy's FMU3Slave stepping
+    the controller without event mode at its sample period (a step from t_k samples at t_k)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Slave
+
+    path = str(fmi3_dir / "ImpedanceController.fmu")
+    md = read_model_description(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    taus = [vr[f"tau{i}"] for i in (1, 2, 3)]
+    identifier = md.coSimulation.modelIdentifier
+    fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=identifier,
+                    instanceName="reference")  # fmt: skip
+    fmu.instantiate()
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    rows = []
+    for k in range(round(T_CTRL / H) + 1):
+        fmu.doStep(k * H, H)
+        rows.append(fmu.getFloat64(taus))
+    fmu.terminate()
+    fmu.freeInstance()
+    return np.array(rows)
+
+
+def controller_in_fmusim(fmi3_dir: Path, out: Path, interface: str, interval: float, *options):
+    subprocess.run([str(FMUSIM), "--interface-type", interface, "--stop-time", str(T_CTRL),
+                    "--output-interval", str(interval), "--output-file", str(out), *options,
+                    str(fmi3_dir / "ImpedanceController.fmu")],
+                   check=True, capture_output=True, timeout=600)  # fmt: skip
+    rows = read_csv(out)
+    return rows["time"], np.stack([rows[f"tau{i}"] for i in (1, 2, 3)], axis=1)
+
+
+def close(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal to fmusim's CSV digits (16 significant)."""
+    return bool(np.all(np.abs(a - b) <= 1e-14 * np.maximum(np.abs(b), 1.0)))
+
+
+@pytest.mark.parametrize(
+    "interface, options, shift",
+    [("cs", [], 1), ("cs", EVENTS, 0), ("me", [], 0)],
+    ids=["cs", "cs-event-mode", "me-time-events"],
+)
+def test_fmusim_samples_the_fmi3_controller_at_every_tick(
+    fmi3_dir, tmp_path, interface, options, shift
+):
+    """At a step of one sample period, the last row at t_k holds the sample of t_k where fmusim
+    handles the tick as an event (Co-Simulation with event mode: the tick at the step's end;
+    Model Exchange: the time event the FMU announced) and of t_k-1 without (the step from t_k-1
+    sampled at its start)."""
+    ref = controller_reference(fmi3_dir)
+    t, tau = controller_in_fmusim(fmi3_dir, tmp_path / "c.csv", interface, H, *options)
+    last = {round(x / H): k for k, x in enumerate(t)}  # the last row at each tick
+    assert sorted(last) == list(range(len(ref)))
+    for k, row in last.items():
+        assert close(tau[row], ref[max(k - shift, 0)]), (k, tau[row], ref[max(k - shift, 0)])
+
+
+def test_fmusim_reads_the_controller_in_its_intermediate_update_at_each_tick(fmi3_dir, tmp_path):
+    """fmusim's communication step of 4 sample periods, event mode, early return allowed and
+    intermediate values recorded: the controller calls its intermediate update at each tick inside
+    a step (fmusim reads the outputs held up to the tick and asks no early return), samples the
+    tick inside the step, and ends each step on a tick in Event Mode."""
+    ref = controller_reference(fmi3_dir)
+    t, tau = controller_in_fmusim(fmi3_dir, tmp_path / "c.csv", "cs", 4 * H, *EVENTS)
+    for k in range(1, len(ref)):
+        at = [row for row, x in enumerate(t) if abs(x - k * H) <= 1e-9 * H]
+        assert at, f"no row at tick {k}"
+        assert close(tau[at[0]], ref[k - 1])  # read in the update: held up to the tick
+        assert close(tau[at[-1]], ref[k] if k % 4 == 0 else ref[k - 1])

@@ -11,8 +11,9 @@ system archive under our master (`impedance-cosim run --ssp`); `run`, a 2-point 
 `stability linear`; with IMPCOSIM_FMUSIM set, the native FMUs under the Reference FMUs' fmusim.
 Fields that hold times, dates, paths and the inputs' hashes and GUIDs (changed sources give
 other ones; the outputs are what must stay) are left out of the JSON and CSV files compared.
-One line per item: equal, DIFFERENT (where), failed (why) or skipped (why); exit status 0 when
-every compared item is equal, 1 otherwise, 2 for bad arguments, 130/143 on SIGINT/SIGTERM (the
+One line per item: equal, DIFFERENT (where), failed (why), skipped (why) or new (built on the new
+side only: an added FMU or archive has no old output); exit status 0 when every compared item is
+equal and none of the old side's is gone, 1 otherwise, 2 for bad arguments, 130/143 on SIGINT/SIGTERM (the
 worktrees are removed).
 """
 
@@ -303,7 +304,7 @@ def compare(trees: dict[str, Path], tmp: Path, stop: float, fmusim: str | None) 
         if kind == "skip":
             line = f"skipped: {args[0]}"
         elif name not in names:
-            line = "DIFFERENT (only built on the new side)"
+            line = "new: only built on the new side, nothing to compare"
         else:
             out = {s: tmp / s / "out" / str(number) for s in trees}
             errors = {s: produce(trees[s], tmp / s / "fmus", out[s], kind, args, stop, fmusim)
@@ -362,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             for tree in added:
                 git("worktree", "remove", "--force", str(tree))
-    counts = {v: verdicts.count(v) for v in ("equal", "DIFFERENT", "failed", "skipped")}
+    counts = {v: verdicts.count(v) for v in ("equal", "DIFFERENT", "failed", "skipped", "new")}
     print(", ".join(f"{n} {v.lower()}" for v, n in counts.items()))
     return 0 if counts["DIFFERENT"] == counts["failed"] == 0 else 1
 

@@ -1,20 +1,19 @@
-"""Proves that a refactoring changed no output, bit for bit: two commits' FMUs, system archives
-and CLI commands run side by side, their output files compared (not a test).
+"""Proves that a refactoring changed no output, bit for bit: two commits' FMUs, system archives and
+CLI commands run side by side, their output files compared (not a test).
 
-    python benchmarks/outputs_equal.py OLD [NEW] [--stop 2]
+python benchmarks/outputs_equal.py OLD [NEW] [--stop 2]
 
-Each side gets a detached git worktree in a temporary folder (NEW omitted: this checkout's
-working tree), builds its FMUs there and runs everything in child processes with that tree on
-PYTHONPATH and as cwd, as benchmarks/compare_commits.py does, so each side's own package runs.
-Compared: every FMU the build wrote, simulated alone by `fmpy simulate` (co-simulation); every
-system archive under our master (`impedance-cosim run --ssp`); `run`, a 2-point `sweep` and
-`stability linear`; with IMPCOSIM_FMUSIM set, the native FMUs under the Reference FMUs' fmusim.
-Fields that hold times, dates, paths and the inputs' hashes and GUIDs (changed sources give
-other ones; the outputs are what must stay) are left out of the JSON and CSV files compared.
-One line per item: equal, DIFFERENT (where), failed (why), skipped (why) or new (built on the new
-side only: an added FMU or archive has no old output); exit status 0 when every compared item is
-equal and none of the old side's is gone, 1 otherwise, 2 for bad arguments, 130/143 on SIGINT/SIGTERM (the
-worktrees are removed).
+Each side gets a detached git worktree in a temporary folder (NEW omitted: this checkout's working
+tree), builds its FMUs there and runs everything in child processes with that tree on PYTHONPATH and
+as cwd, as benchmarks/compare_commits.py does, so each side's own package runs. Compared: every FMU
+the build wrote, simulated alone by `fmpy simulate` (co-simulation); every system archive under our
+master (`impedance-cosim run --ssp`); `run`, a 2-point `sweep` and `stability linear`; with
+IMPCOSIM_FMUSIM set, the native FMUs under the Reference FMUs' fmusim. Fields that hold times,
+dates, paths and the inputs' hashes and GUIDs (changed sources give other ones; the outputs are what
+must stay) are left out of the JSON and CSV files compared. One line per item: equal, DIFFERENT
+(where), failed (why), skipped (why) or new (built on the new side only: an added FMU or archive has
+no old output); exit status 0 when every compared item is equal and none of the old side's is gone,
+1 otherwise, 2 for bad arguments, 130/143 on SIGINT/SIGTERM (the worktrees are removed).
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
 """The FMI 3.0 plant and controller under a third-party host: the Reference FMUs' fmusim (0.0.39,
 the last release with it), built from its sources and named by IMPCOSIM_FMUSIM (skipped otherwise:
-it is not on PyPI or in Debian; docs/fmi3.md says how to build it). fmusim drives the plant alone with
-the torques of our `run --event-exact` closed loop, held over each step as our master holds them;
-with its event mode, early return and intermediate values on it must stop at the contact switch
-our run found, and on the grid both runs must agree with ours. The controller alone must take
-every sample of its clock in fmusim's Co-Simulation (with and without event mode) and Model
-Exchange as in fmpy's host."""
+it is not on PyPI or in Debian; docs/fmi3.md says how to build it). fmusim drives the plant alone
+with the torques of our `run --event-exact` closed loop, held over each step as our master holds
+them; with its event mode, early return and intermediate values on it must stop at the contact
+switch our run found, and on the grid both runs must agree with ours. The controller alone must take
+every sample of its clock in fmusim's Co-Simulation (with and without event mode) and Model Exchange
+as in fmpy's host."""
 
 from __future__ import annotations
 

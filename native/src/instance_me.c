@@ -201,17 +201,6 @@ fmi2Status instance_set_continuous_states(fmi2Component c, const fmi2Real x[], s
     return fmi2OK;
 }
 
-fmi2Status instance_get_continuous_states(fmi2Component c, fmi2Real x[], size_t nx)
-{
-    Instance *inst = me_array(c, x, nx, N_STATES, "states");
-    fmi2Status status = inst ? refresh(inst) : fmi2Error;
-    if (status != fmi2OK) {
-        return status;
-    }
-    model_me_get_states(&inst->s.d, x);
-    return fmi2OK;
-}
-
 fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
     Instance *inst = me_array(c, x_nominal, nx, N_STATES, "states");
@@ -226,33 +215,44 @@ fmi2Status instance_get_nominals(fmi2Component c, fmi2Real x_nominal[], size_t n
 
 /* --- model equations ------------------------------------------------------------------------ */
 
-fmi2Status instance_get_derivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
+typedef enum { ME_STATES, ME_DERIVATIVES, ME_INDICATORS } MeValues;
+
+/* The continuous states, their derivatives or the event indicators at the current time, states
+ * and inputs (brought up to date first), into out[0..n). */
+static fmi2Status me_read(fmi2Component c, fmi2Real out[], size_t n, MeValues which)
 {
-    Instance *inst = me_array(c, derivatives, nx, N_STATES, "derivatives");
+    static const char *const what[] = {"states", "derivatives", "event indicators"};
+    const size_t expected = which == ME_INDICATORS ? N_EVENT_INDICATORS : N_STATES;
+    Instance *inst = me_array(c, out, n, expected, what[which]);
     fmi2Status status = inst ? refresh(inst) : fmi2Error;
     if (status != fmi2OK) {
         return status;
     }
+    if (which == ME_STATES) {
+        model_me_get_states(&inst->s.d, out);
+    } else if (which == ME_INDICATORS) {
+        if (model_me_event_indicators(&inst->s.d, out, inst->msg)) {
+            return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
+        }
+    } else {
 #if N_STATES > 0
-    for (size_t k = 0; k < nx; k++) {
-        derivatives[k] = inst->s.d.r[DERIVATIVE_VRS[k]];
-    }
+        for (size_t k = 0; k < n; k++) {
+            out[k] = inst->s.d.r[DERIVATIVE_VRS[k]];
+        }
 #endif
+    }
     return fmi2OK;
 }
 
-fmi2Status instance_get_event_indicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
-{
-    Instance *inst = me_array(c, eventIndicators, ni, N_EVENT_INDICATORS, "event indicators");
-    fmi2Status status = inst ? refresh(inst) : fmi2Error;
-    if (status != fmi2OK) {
-        return status;
+#define ME_READ(function, which)                                                                   \
+    fmi2Status function(fmi2Component c, fmi2Real out[], size_t n)                             \
+    {                                                                                          \
+        return me_read(c, out, n, which);                                                      \
     }
-    if (model_me_event_indicators(&inst->s.d, eventIndicators, inst->msg)) {
-        return ERROR(inst, "at t=%.17g: %s", now(inst), inst->msg);
-    }
-    return fmi2OK;
-}
+
+ME_READ(instance_get_continuous_states, ME_STATES)
+ME_READ(instance_get_derivatives, ME_DERIVATIVES)
+ME_READ(instance_get_event_indicators, ME_INDICATORS)
 
 #else /* co-simulation only: fmi2Instantiate refuses fmi2ModelExchange, these are never reached */
 

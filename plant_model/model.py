@@ -20,7 +20,6 @@ from impedance_cosim.fmi.model import (
     FmuModel,
     ModelError,
     build_params,
-    check_finite_inputs,
     check_finite_outputs,
     check_step,
 )
@@ -276,8 +275,7 @@ class PlantModel(FmuModel):
     # --- FmuModel -------------------------------------------------------------------------------
 
     def do_step(self, t: float, h: float, inputs: tuple) -> None:
-        check_finite_inputs(INPUTS, inputs)
-        check_step(t, h, self.t, "plant")
+        check_step(t, h, self.t, "plant", INPUTS, inputs)
         t_end = t + h
         y = (*self.q, *self.qd)
         t_cur, mode, hh, switches = t, self.in_contact, self.h, 0

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from impedance_cosim.fmi.model import FmuModel, ModelError, check_finite_inputs, check_step
+from impedance_cosim.fmi.model import FmuModel, ModelError, check_step
 from impedance_cosim.fmi.variables import Variable
 from impedance_cosim.physics.description import RobotDescription, describe
 from impedance_cosim.physics.wall import WallParams
@@ -152,8 +152,7 @@ class MujocoPlantModel(PlantModel):
     # --- stepping -------------------------------------------------------------------------------
 
     def do_step(self, t: float, h: float, inputs: tuple) -> None:
-        check_finite_inputs(INPUTS, inputs)
-        check_step(t, h, self.t, "plant")
+        check_step(t, h, self.t, "plant", INPUTS, inputs)
         mujoco, m, d = self._mujoco, self.mj, self.mj_data
         n = max(1, math.ceil(h / self.timestep * (1.0 - 1e-12)))
         if n > MAX_SUBSTEPS:

@@ -74,9 +74,12 @@ def build_params(cls: type[P], values: dict[str, Any]) -> P:
     return cls(**{k: v for k, v in values.items() if k in names})
 
 
-def check_step(t: float, h: float, model_t: float, who: str) -> None:
-    """Raise ModelError unless a step of h from t is one the model can take: h finite and > 0,
-    and t the model's own time (within 1e-9 relative)."""
+def check_step(
+    t: float, h: float, model_t: float, who: str, names: tuple[str, ...] = (), inputs: tuple = ()
+) -> None:
+    """Raise ModelError unless a step of h from t is one the model can take: its inputs (named by
+    names) finite, h finite and > 0, and t the model's own time (within 1e-9 relative)."""
+    check_finite_inputs(names, inputs)
     if not h > 0.0:
         raise ModelError(f"communication step must be > 0 (got {h})")
     if h == math.inf:

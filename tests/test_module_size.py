@@ -4,6 +4,7 @@ exempt."""
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
@@ -77,3 +78,85 @@ def test_c_file_is_at_most_500_lines(path: str):
         pytest.skip("generated")
     lines = len(file.read_text(encoding="utf-8").splitlines())
     assert lines <= MAX_C_LINES, f"{path} has {lines} lines (limit {MAX_C_LINES}): split it"
+
+
+# --- functions: no hand-written function over MAX_FUNCTION_LINES lines, Python or C -------------
+
+MAX_FUNCTION_LINES = 80
+FUNCTION_PACKAGES = (*PACKAGES, "benchmarks", "tests", "fuzz")
+FUNCTION_C_FOLDERS = (*C_FOLDERS, "tests/c_host")
+C_LITERAL_OR_COMMENT = re.compile(r'"(?:\\.|[^"\\])*"|\'(?:\\.|[^\'\\])*\'|/\*.*?\*/|//.*')
+C_NAME = re.compile(r"(\w+)\s*\(")
+
+
+def function_files() -> list[str]:
+    python = (p for package in FUNCTION_PACKAGES for p in (ROOT / package).rglob("*.py"))
+    c = (p for folder in FUNCTION_C_FOLDERS for p in (ROOT / folder).rglob("*.[ch]"))
+    return sorted(p.relative_to(ROOT).as_posix() for p in (*python, *c))
+
+
+def python_functions(text: str) -> list[tuple[str, int, int]]:
+    """(name, first line, lines) of every def, nested ones included, decorators not counted."""
+    return [
+        (node.name, node.lineno, node.end_lineno - node.lineno + 1)
+        for node in ast.walk(ast.parse(text))
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+    ]
+
+
+def c_functions(text: str) -> list[tuple[str, int, int]]:
+    """(name, line of its "{", lines) of every C function: a line starting with "{" at brace
+    depth 0 to its matching "}"; the name is the first "name(" on the nearest line above that
+    starts in column 0 (the signature's first line). Braces in literals and comments don't
+    count."""
+    lines = text.splitlines()
+    found, depth, start = [], 0, None
+    for number, line in enumerate(lines, 1):
+        if depth == 0 and line.startswith("{"):
+            start = number
+        code = C_LITERAL_OR_COMMENT.sub("", line)
+        depth += code.count("{") - code.count("}")
+        if depth == 0 and start is not None:
+            above = (s for s in reversed(lines[: start - 1]) if s[:1].isalpha() or s[:1] == "_")
+            name = C_NAME.search(next(above, ""))
+            found.append((name.group(1) if name else "?", start, number - start + 1))
+            start = None
+    return found
+
+
+def too_long(path: str, text: str) -> list[str]:
+    functions = python_functions(text) if path.endswith(".py") else c_functions(text)
+    return [
+        f"{path}:{line} {name} has {lines} lines (limit {MAX_FUNCTION_LINES})"
+        for name, line, lines in functions
+        if lines > MAX_FUNCTION_LINES
+    ]
+
+
+def test_the_function_scans_find_functions_and_their_lengths():
+    """The scans can fail: a long function in each language is reported by name and length."""
+    body = "".join(f"        x = {k}\n" for k in range(MAX_FUNCTION_LINES))
+    assert too_long("long.py", f"def outer():\n    def inner():\n{body}") == [
+        f"long.py:1 outer has {MAX_FUNCTION_LINES + 2} lines (limit {MAX_FUNCTION_LINES})",
+        f"long.py:2 inner has {MAX_FUNCTION_LINES + 1} lines (limit {MAX_FUNCTION_LINES})",
+    ]
+    c_body = "".join(f'    puts("{{{k}");\n' for k in range(MAX_FUNCTION_LINES))
+    c_text = f"/* a {{ */\nstatic int\nlong_one(int a,\n         int b)\n{{\n{c_body}}}\n"
+    assert c_functions(c_text) == [("long_one", 5, MAX_FUNCTION_LINES + 2)]
+    assert too_long("long.c", c_text) == [
+        f"long.c:5 long_one has {MAX_FUNCTION_LINES + 2} lines (limit {MAX_FUNCTION_LINES})"
+    ]
+    ode = {name for name, _, _ in c_functions((ROOT / "native/src/ode.c").read_text())}
+    assert {"ode_dopri5_step", "locate", "ode_integrate"} <= ode
+    assert len(function_files()) > 200
+
+
+@pytest.mark.parametrize("path", function_files())
+def test_no_function_is_over_80_lines(path: str):
+    """A hand-written function past MAX_FUNCTION_LINES is asking to be split into named steps
+    (generated files, marked as above, are exempt)."""
+    file = ROOT / path
+    if is_generated(file):
+        pytest.skip("generated")
+    long_ones = too_long(path, file.read_text(encoding="utf-8"))
+    assert not long_ones, "split by meaning: " + "; ".join(long_ones)

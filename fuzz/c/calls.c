@@ -44,6 +44,145 @@ static int work_bound(fmi2ValueReference vr)
                            strcmp(VARS[vr].name, "max_samples_per_step") == 0);
 }
 
+static void set_reals(Input *in, fmi2Component c, const fmi2ValueReference *vr, size_t nvr)
+{
+    fmi2Real v[4];
+    for (size_t k = 0; k < nvr; k++) {
+        v[k] = PICK(in, REALS);
+    }
+    fmi2SetReal(c, vr, nvr, v);
+}
+
+static void set_integers(Input *in, fmi2Component c, const fmi2ValueReference *vr, size_t nvr)
+{
+    fmi2Integer v[4];
+    for (size_t k = 0; k < nvr; k++) {
+        v[k] = work_bound(vr[k]) ? (fmi2Integer)(next(in) % 50) : PICK(in, INTS);
+    }
+    fmi2SetInteger(c, vr, nvr, v);
+}
+
+static void set_booleans(Input *in, fmi2Component c, const fmi2ValueReference *vr, size_t nvr)
+{
+    fmi2Boolean v[4];
+    for (size_t k = 0; k < nvr; k++) {
+        v[k] = (fmi2Boolean)PICK(in, INTS);
+    }
+    fmi2SetBoolean(c, vr, nvr, v);
+}
+
+static void set_strings(Input *in, fmi2Component c, const fmi2ValueReference *vr, size_t nvr)
+{
+    char text[600];
+    fmi2String v[4];
+    const size_t len = next(in) * 2;
+    memset(text, 'x', len);
+    text[len] = '\0';
+    for (size_t k = 0; k < nvr; k++) {
+        v[k] = next(in) & 1 ? text : PICK(in, STRINGS);
+    }
+    fmi2SetString(c, vr, nvr, v);
+}
+
+static void get_all(fmi2Component c, const fmi2ValueReference *vr, size_t nvr)
+{
+    fmi2Real r[4];
+    fmi2Integer i[4];
+    fmi2Boolean b[4];
+    fmi2String s[4];
+    fmi2GetReal(c, vr, nvr, r);
+    fmi2GetInteger(c, vr, nvr, i);
+    fmi2GetBoolean(c, vr, nvr, b);
+    fmi2GetString(c, vr, nvr, s);
+}
+
+/* serialize one state slot, maybe flip a bit, deserialize into the other */
+static void round_trip(Input *in, fmi2Component c, fmi2FMUstate states[2])
+{
+    const int k = next(in) & 1;
+    size_t n = 0;
+    uint8_t *bytes;
+    if (!states[k] || fmi2SerializedFMUstateSize(c, states[k], &n) != fmi2OK ||
+        !(bytes = malloc(n))) {
+        return;
+    }
+    if (fmi2SerializeFMUstate(c, states[k], (fmi2Byte *)bytes, n) == fmi2OK) {
+        if (n && next(in) & 1) {
+            bytes[next(in) * 31 % n] ^= (uint8_t)(1u << (next(in) % 8));
+        }
+        fmi2DeSerializeFMUstate(c, (const fmi2Byte *)bytes, n, &states[k ^ 1]);
+    }
+    free(bytes);
+}
+
+static void free_all(fmi2Component c, fmi2FMUstate states[2])
+{
+    for (int k = 0; k < 2; k++) {
+        fmi2FreeFMUstate(c, &states[k]);
+    }
+    fmi2FreeInstance(c);
+}
+
+/* One call, op 0..19 (the input byte's meaning: keep it, the committed corpora rely on it), on
+ * the instance *c (NULL for op 0 only). */
+static void call(Input *in, unsigned op, fmi2Component *c, fmi2FMUstate states[2],
+                 const fmi2ValueReference *vr, size_t nvr)
+{
+    switch (op) {
+    case 0:
+        if (!*c) {
+            *c = fmi2Instantiate("fuzz", next(in) & 1 ? fmi2ModelExchange : fmi2CoSimulation,
+                                 next(in) & 1 ? "{wrong}" : MODEL_GUID, "", &CALLBACKS, fmi2False,
+                                 (fmi2Boolean)(next(in) & 1));
+        }
+        break;
+    case 1:
+        fmi2SetupExperiment(*c, (fmi2Boolean)(next(in) % 3), PICK(in, REALS), PICK(in, REALS),
+                            (fmi2Boolean)(next(in) % 3), PICK(in, REALS));
+        break;
+    case 2: fmi2EnterInitializationMode(*c); break;
+    case 3: fmi2ExitInitializationMode(*c); break;
+    case 4: {
+        const double t = PICK(in, REALS), h = PICK(in, REALS);
+        fmi2DoStep(*c, t, h > 0.01 ? 0.01 : h, (fmi2Boolean)(next(in) % 3));
+        break;
+    }
+    case 5: set_reals(in, *c, vr, nvr); break;
+    case 6: set_integers(in, *c, vr, nvr); break;
+    case 7: set_booleans(in, *c, vr, nvr); break;
+    case 8: set_strings(in, *c, vr, nvr); break;
+    case 9: get_all(*c, vr, nvr); break;
+    case 10: fmi2GetFMUstate(*c, &states[next(in) & 1]); break;
+    case 11: {
+        fmi2FMUstate s = states[next(in) & 1];
+        if (s) {
+            fmi2SetFMUstate(*c, s);
+        }
+        break;
+    }
+    case 12: fmi2FreeFMUstate(*c, &states[next(in) & 1]); break;
+    case 13: round_trip(in, *c, states); break;
+    case 14: fmi2Terminate(*c); break;
+    case 15: fmi2Reset(*c); break;
+    case 16: {
+        fmi2Real r[4];
+        const fmi2Integer order[4] = {1, 2, 0, -1};
+        fmi2GetRealOutputDerivatives(*c, vr, nvr, order, r);
+        break;
+    }
+    case 17: {
+        fmi2Real known[4] = {1, 1, 1, 1}, out[4];
+        fmi2GetDirectionalDerivative(*c, vr, nvr, vr, nvr, known, out);
+        break;
+    }
+    case 18: fmi2SetDebugLogging(*c, (fmi2Boolean)(next(in) & 1), 0, NULL); break;
+    default:
+        free_all(*c, states);
+        *c = NULL;
+        break;
+    }
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     Input in = {data, size};
@@ -60,126 +199,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (!c && op != 0) {
             continue;
         }
-        switch (op) {
-        case 0:
-            if (!c) {
-                c = fmi2Instantiate("fuzz", next(&in) & 1 ? fmi2ModelExchange : fmi2CoSimulation,
-                                    next(&in) & 1 ? "{wrong}" : MODEL_GUID, "", &CALLBACKS,
-                                    fmi2False, (fmi2Boolean)(next(&in) & 1));
-            }
-            break;
-        case 1:
-            fmi2SetupExperiment(c, (fmi2Boolean)(next(&in) % 3), PICK(&in, REALS),
-                                PICK(&in, REALS), (fmi2Boolean)(next(&in) % 3), PICK(&in, REALS));
-            break;
-        case 2: fmi2EnterInitializationMode(c); break;
-        case 3: fmi2ExitInitializationMode(c); break;
-        case 4: {
-            const double t = PICK(&in, REALS), h = PICK(&in, REALS);
-            fmi2DoStep(c, t, h > 0.01 ? 0.01 : h, (fmi2Boolean)(next(&in) % 3));
-            break;
-        }
-        case 5: {
-            fmi2Real v[4];
-            for (size_t k = 0; k < nvr; k++) {
-                v[k] = PICK(&in, REALS);
-            }
-            fmi2SetReal(c, vr, nvr, v);
-            break;
-        }
-        case 6: {
-            fmi2Integer v[4];
-            for (size_t k = 0; k < nvr; k++) {
-                v[k] = work_bound(vr[k]) ? (fmi2Integer)(next(&in) % 50) : PICK(&in, INTS);
-            }
-            fmi2SetInteger(c, vr, nvr, v);
-            break;
-        }
-        case 7: {
-            fmi2Boolean v[4];
-            for (size_t k = 0; k < nvr; k++) {
-                v[k] = (fmi2Boolean)PICK(&in, INTS);
-            }
-            fmi2SetBoolean(c, vr, nvr, v);
-            break;
-        }
-        case 8: {
-            char text[600];
-            fmi2String v[4];
-            const size_t len = next(&in) * 2;
-            memset(text, 'x', len);
-            text[len] = '\0';
-            for (size_t k = 0; k < nvr; k++) {
-                v[k] = next(&in) & 1 ? text : PICK(&in, STRINGS);
-            }
-            fmi2SetString(c, vr, nvr, v);
-            break;
-        }
-        case 9: {
-            fmi2Real r[4];
-            fmi2Integer i[4];
-            fmi2Boolean b[4];
-            fmi2String s[4];
-            fmi2GetReal(c, vr, nvr, r);
-            fmi2GetInteger(c, vr, nvr, i);
-            fmi2GetBoolean(c, vr, nvr, b);
-            fmi2GetString(c, vr, nvr, s);
-            break;
-        }
-        case 10: fmi2GetFMUstate(c, &states[next(&in) & 1]); break;
-        case 11: {
-            fmi2FMUstate s = states[next(&in) & 1];
-            if (s) {
-                fmi2SetFMUstate(c, s);
-            }
-            break;
-        }
-        case 12: fmi2FreeFMUstate(c, &states[next(&in) & 1]); break;
-        case 13: {
-            const int k = next(&in) & 1;
-            size_t n = 0;
-            uint8_t *bytes;
-            if (!states[k] || fmi2SerializedFMUstateSize(c, states[k], &n) != fmi2OK ||
-                !(bytes = malloc(n))) {
-                break;
-            }
-            if (fmi2SerializeFMUstate(c, states[k], (fmi2Byte *)bytes, n) == fmi2OK) {
-                if (n && next(&in) & 1) {
-                    bytes[next(&in) * 31 % n] ^= (uint8_t)(1u << (next(&in) % 8));
-                }
-                fmi2DeSerializeFMUstate(c, (const fmi2Byte *)bytes, n, &states[k ^ 1]);
-            }
-            free(bytes);
-            break;
-        }
-        case 14: fmi2Terminate(c); break;
-        case 15: fmi2Reset(c); break;
-        case 16: {
-            fmi2Real r[4];
-            const fmi2Integer order[4] = {1, 2, 0, -1};
-            fmi2GetRealOutputDerivatives(c, vr, nvr, order, r);
-            break;
-        }
-        case 17: {
-            fmi2Real known[4] = {1, 1, 1, 1}, out[4];
-            fmi2GetDirectionalDerivative(c, vr, nvr, vr, nvr, known, out);
-            break;
-        }
-        case 18: fmi2SetDebugLogging(c, (fmi2Boolean)(next(&in) & 1), 0, NULL); break;
-        default:
-            for (int k = 0; k < 2; k++) {
-                fmi2FreeFMUstate(c, &states[k]);
-            }
-            fmi2FreeInstance(c);
-            c = NULL;
-            break;
-        }
+        call(&in, op, &c, states, vr, nvr);
     }
     if (c) {
-        for (int k = 0; k < 2; k++) {
-            fmi2FreeFMUstate(c, &states[k]);
-        }
-        fmi2FreeInstance(c);
+        free_all(c, states);
     }
     return 0;
 }

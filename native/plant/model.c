@@ -333,27 +333,14 @@ int model_initialize(Data *d, char *msg)
     return 0;
 }
 
-/* model_step; with reached (FMI 3 early return) it stops at the first contact switch inside the
- * step, the switch then done, and says where it stopped (t + h when there was none). With work,
- * the evaluations and switches of the fmi3DoStep so far count against its bounds, and this
- * step's are added to them. */
-static int plant_step(Data *d, double t, double h, double *reached, StepWork *work,
-                      char *msg)
+/* plant_step's refusals: an input not finite, a bad step size, a step not from the plant's t. */
+static int check_step(const Data *d, const PlantCtx *c, double t, double h, char *msg)
 {
     static const char *const inputs[3] = {"tau1", "tau2", "tau3"};
-    ModelState *m = &d->m;
-    PlantCtx c;
-    OdeResult res;
-    double y[ODE_N], t_end, t_cur, hh, scale;
-    char err[ODE_MSG_MAX], a[REPR], b[REPR];
-    int mode, switches = work ? work->switches : 0;
-    const int euler = (int)d->i[VR_euler_substeps];
-    int64_t budget = d->i[VR_max_rhs_evaluations] - (work ? work->rhs_evaluations : 0);
-    plant_read_ctx(d, &c);
-    c.budget = &budget;
-    c.max_evaluations = d->i[VR_max_rhs_evaluations];
+    double scale;
+    char a[REPR], b[REPR];
     for (int i = 0; i < 3; i++) {
-        const double v = c.tau[i];
+        const double v = c->tau[i];
         if (!(v - v == 0.0)) { /* false for NaN and +-inf */
             py_float_repr(v, a, sizeof a);
             return fail(msg, "input %s is not finite (%s)", inputs[i], a);
@@ -367,44 +354,81 @@ static int plant_step(Data *d, double t, double h, double *reached, StepWork *wo
         return fail(msg, "communication step must be finite (got inf)");
     }
     scale = fabs(t) > 1.0 ? fabs(t) : 1.0; /* Python max(1.0, abs(t)) */
-    if (fabs(t - m->t) > 1e-9 * scale) {
+    if (fabs(t - d->m.t) > 1e-9 * scale) {
         py_float_repr(t, a, sizeof a);
-        py_float_repr(m->t, b, sizeof b);
+        py_float_repr(d->m.t, b, sizeof b);
         return fail(msg, "doStep at t=%s, but the plant is at t=%s", a, b);
+    }
+    return 0;
+}
+
+/* The adaptive integration of y from t to *t_end, the contact mode (*mode) switched at each
+ * crossing and counted in *switches; *hh the step-size guess. With early it stops at the first
+ * switch, *t_end then the time of the switch. */
+static int integrate(const Data *d, PlantCtx *c, double y[ODE_N], double t, double *t_end,
+                     double *hh, int *mode, int *switches, int early, char *msg)
+{
+    OdeResult res;
+    char err[ODE_MSG_MAX];
+    double t_cur = t;
+    for (;;) {
+        c->in_contact = *mode;
+        if (ode_integrate(plant_rhs, plant_event, c, t_cur, y, *t_end, *hh, d->r[VR_rtol],
+                          d->r[VR_atol], ODE_TIME_TOL, &res, err)) {
+            return fail(msg, "plant integration failed: %s", err);
+        }
+        t_cur = res.t;
+        memcpy(y, res.y, sizeof res.y);
+        *hh = res.h;
+        if (!res.hit) {
+            return 0;
+        }
+        *mode = !*mode;
+        *switches += 1;
+        if (*switches > MAX_SWITCHES) {
+            return fail(msg, "plant integration failed: contact chattering: more than %d switches"
+                             " in a step", MAX_SWITCHES);
+        }
+        if (early) { /* return early, at the switch (FMI 3 co-simulation only) */
+            *t_end = t_cur;
+            return 0;
+        }
+    }
+}
+
+/* model_step; with reached (FMI 3 early return) it stops at the first contact switch inside the
+ * step, the switch then done, and says where it stopped (t + h when there was none). With work,
+ * the evaluations and switches of the fmi3DoStep so far count against its bounds, and this
+ * step's are added to them. */
+static int plant_step(Data *d, double t, double h, double *reached, StepWork *work,
+                      char *msg)
+{
+    ModelState *m = &d->m;
+    PlantCtx c;
+    double y[ODE_N], t_end, hh;
+    char err[ODE_MSG_MAX];
+    int mode, switches = work ? work->switches : 0;
+    const int euler = (int)d->i[VR_euler_substeps];
+    int64_t budget = d->i[VR_max_rhs_evaluations] - (work ? work->rhs_evaluations : 0);
+    plant_read_ctx(d, &c);
+    c.budget = &budget;
+    c.max_evaluations = d->i[VR_max_rhs_evaluations];
+    if (check_step(d, &c, t, h, msg)) {
+        return 1;
     }
     t_end = t + h;
     for (int i = 0; i < 3; i++) {
         y[i] = m->q[i];
         y[3 + i] = m->qd[i];
     }
-    t_cur = t;
     mode = m->in_contact;
     hh = m->h;
     if (euler > 0 && euler_steps(&c, y, h, euler, &mode, err)) {
         return fail(msg, "plant integration failed: %s", err);
     }
-    while (euler == 0) {
-        c.in_contact = mode;
-        if (ode_integrate(plant_rhs, plant_event, &c, t_cur, y, t_end, hh, d->r[VR_rtol],
-                          d->r[VR_atol], ODE_TIME_TOL, &res, err)) {
-            return fail(msg, "plant integration failed: %s", err);
-        }
-        t_cur = res.t;
-        memcpy(y, res.y, sizeof y);
-        hh = res.h;
-        if (!res.hit) {
-            break;
-        }
-        mode = !mode;
-        switches += 1;
-        if (switches > MAX_SWITCHES) {
-            return fail(msg, "plant integration failed: contact chattering: more than %d switches"
-                             " in a step", MAX_SWITCHES);
-        }
-        if (reached) { /* return early, at the switch (FMI 3 co-simulation only) */
-            t_end = t_cur;
-            break;
-        }
+    if (euler == 0 &&
+        integrate(d, &c, y, t, &t_end, &hh, &mode, &switches, reached != NULL, msg)) {
+        return 1;
     }
     if (work) {
         work->rhs_evaluations = d->i[VR_max_rhs_evaluations] - budget;

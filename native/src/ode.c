@@ -165,25 +165,118 @@ static int locate(OdeRhs f, OdeEvent event, void *ctx, const double y[ODE_N],
     return ODE_OK;
 }
 
+/* One ode_integrate run: the problem and where the integration stands. */
+typedef struct {
+    OdeRhs f;
+    OdeEvent event;
+    void *ctx;
+    double t1, rtol, atol, time_tol;
+    double t, h, g_prev, y[ODE_N], k1[ODE_N];
+} Run;
+
+/* A rejected step of h_try: the smaller next step size into r->h, or ODE_FAILED with msg when
+ * the state went non-finite or the step size underflowed. */
+static int rejected(Run *r, double norm, double h_try, char *msg)
+{
+    char a[40];
+    if (!isfinite(norm) && !all_finite(r->y)) {
+        py_float_repr(r->t, a, sizeof a);
+        snprintf(msg, ODE_MSG_MAX, "non-finite state at t=%s", a);
+        return ODE_FAILED;
+    }
+    if (isfinite(norm)) {
+        const double m = 0.9 * pow(norm, -0.2);
+        r->h = h_try * (m > 0.2 ? m : 0.2); /* Python max(0.2, m) */
+    } else {
+        r->h = 0.1 * h_try;
+    }
+    if (r->h < ODE_MIN_STEP) {
+        py_float_repr(r->t, a, sizeof a);
+        snprintf(msg, ODE_MSG_MAX, "step size underflow at t=%s (h=%.3g s)", a, r->h);
+        return ODE_FAILED;
+    }
+    return ODE_OK;
+}
+
+/* The step size proposed after an accepted step of h_try with the guess h; a step clipped to
+ * reach t1 keeps the larger guess. */
+static double next_step_size(double norm, double h_try, double h)
+{
+    double h_next;
+    if (norm > 0.0) {
+        const double m = 0.9 * pow(norm, -0.2);
+        h_next = h_try * (m < 5.0 ? m : 5.0); /* Python min(5.0, m) */
+    } else {
+        h_next = 5.0 * h_try;
+    }
+    if (h_try < h) {
+        return h_next > h ? h_next : h; /* Python max(h, h_next) */
+    }
+    return h_next;
+}
+
+/* One attempted step of h_try from (r->t, r->y): rejected (r->h shrunk), accepted (r moved to
+ * its end) or, when the event crosses zero inside it, res set at the crossing and *hit = 1. */
+static int attempt(Run *r, double h_try, OdeResult *res, int *hit, char *msg)
+{
+    double y_new[ODE_N], err[ODE_N], k7[ODE_N], g_new, norm;
+    int i;
+    if (ode_dopri5_step(r->f, r->ctx, r->y, h_try, r->k1, y_new, err, k7, msg)) {
+        return ODE_FAILED;
+    }
+    norm = ode_error_norm(r->y, y_new, err, r->rtol, r->atol);
+    if (norm > 1.0) {
+        return rejected(r, norm, h_try, msg);
+    }
+    r->h = next_step_size(norm, h_try, r->h);
+    if (r->event != NULL && r->g_prev <= 0.0) {
+        if (r->event(r->ctx, y_new, &g_new, msg)) {
+            return ODE_FAILED;
+        }
+        if (g_new > 0.0) {
+            double t_ev;
+            if (locate(r->f, r->event, r->ctx, r->y, r->k1, h_try, r->g_prev, r->time_tol, &t_ev,
+                       res->y, msg)) {
+                return ODE_FAILED;
+            }
+            res->t = r->t + t_ev;
+            res->h = r->h;
+            res->hit = 1;
+            *hit = 1;
+            return ODE_OK;
+        }
+    }
+    r->t = h_try == r->t1 - r->t ? r->t1 : r->t + h_try;
+    for (i = 0; i < ODE_N; i++) {
+        r->y[i] = y_new[i];
+        r->k1[i] = k7[i];
+    }
+    if (r->event != NULL) {
+        return r->event(r->ctx, r->y, &r->g_prev, msg) ? ODE_FAILED : ODE_OK;
+    }
+    r->g_prev = -1.0;
+    return ODE_OK;
+}
+
 int ode_integrate(OdeRhs f, OdeEvent event, void *ctx, double t0, const double y0[ODE_N],
                   double t1, double h, double rtol, double atol, double time_tol, OdeResult *res,
                   char *msg)
 {
-    double t = t0, y[ODE_N], k1[ODE_N], y_new[ODE_N], err[ODE_N], k7[ODE_N];
-    double g_prev = -1.0, g_new, h_try, norm;
+    Run r = {f, event, ctx, t1, rtol, atol, time_tol, t0, h, -1.0, {0.0}, {0.0}};
+    double h_try;
     char a[40], b[40];
     long steps = 0;
-    int i;
+    int i, hit = 0;
     for (i = 0; i < ODE_N; i++) {
-        y[i] = y0[i];
+        r.y[i] = y0[i];
     }
-    if (f(ctx, y, k1, msg)) {
+    if (f(ctx, r.y, r.k1, msg)) {
         return ODE_FAILED;
     }
-    if (event != NULL && event(ctx, y, &g_prev, msg)) {
+    if (event != NULL && event(ctx, r.y, &r.g_prev, msg)) {
         return ODE_FAILED;
     }
-    while (t1 - t > time_tol) {
+    while (t1 - r.t > time_tol) {
         steps += 1;
         if (steps > ODE_MAX_STEPS) {
             py_float_repr(t0, a, sizeof a);
@@ -192,78 +285,19 @@ int ode_integrate(OdeRhs f, OdeEvent event, void *ctx, double t0, const double y
                      a, b);
             return ODE_FAILED;
         }
-        h_try = (t1 - t) < h ? (t1 - t) : h; /* Python min(h, t1 - t) */
-        if (ode_dopri5_step(f, ctx, y, h_try, k1, y_new, err, k7, msg)) {
+        h_try = (t1 - r.t) < r.h ? (t1 - r.t) : r.h; /* Python min(h, t1 - t) */
+        if (attempt(&r, h_try, res, &hit, msg)) {
             return ODE_FAILED;
         }
-        norm = ode_error_norm(y, y_new, err, rtol, atol);
-        if (norm > 1.0) {
-            if (!isfinite(norm) && !all_finite(y)) {
-                py_float_repr(t, a, sizeof a);
-                snprintf(msg, ODE_MSG_MAX, "non-finite state at t=%s", a);
-                return ODE_FAILED;
-            }
-            if (isfinite(norm)) {
-                const double m = 0.9 * pow(norm, -0.2);
-                h = h_try * (m > 0.2 ? m : 0.2); /* Python max(0.2, m) */
-            } else {
-                h = 0.1 * h_try;
-            }
-            if (h < ODE_MIN_STEP) {
-                py_float_repr(t, a, sizeof a);
-                snprintf(msg, ODE_MSG_MAX, "step size underflow at t=%s (h=%.3g s)", a, h);
-                return ODE_FAILED;
-            }
-            continue;
-        }
-        /* Accepted. Propose the next step; a step clipped to reach t1 keeps the larger guess. */
-        {
-            double h_next;
-            if (norm > 0.0) {
-                const double m = 0.9 * pow(norm, -0.2);
-                h_next = h_try * (m < 5.0 ? m : 5.0); /* Python min(5.0, m) */
-            } else {
-                h_next = 5.0 * h_try;
-            }
-            if (h_try < h) {
-                h = h_next > h ? h_next : h; /* Python max(h, h_next) */
-            } else {
-                h = h_next;
-            }
-        }
-        if (event != NULL && g_prev <= 0.0) {
-            if (event(ctx, y_new, &g_new, msg)) {
-                return ODE_FAILED;
-            }
-            if (g_new > 0.0) {
-                double t_ev;
-                if (locate(f, event, ctx, y, k1, h_try, g_prev, time_tol, &t_ev, res->y, msg)) {
-                    return ODE_FAILED;
-                }
-                res->t = t + t_ev;
-                res->h = h;
-                res->hit = 1;
-                return ODE_OK;
-            }
-        }
-        t = h_try == t1 - t ? t1 : t + h_try;
-        for (i = 0; i < ODE_N; i++) {
-            y[i] = y_new[i];
-            k1[i] = k7[i];
-        }
-        if (event != NULL) {
-            if (event(ctx, y, &g_prev, msg)) {
-                return ODE_FAILED;
-            }
-        } else {
-            g_prev = -1.0;
+        if (hit) {
+            return ODE_OK;
         }
     }
     res->t = t1;
     for (i = 0; i < ODE_N; i++) {
-        res->y[i] = y[i];
+        res->y[i] = r.y[i];
     }
-    res->h = h;
+    res->h = r.h;
     res->hit = 0;
     return ODE_OK;
 }

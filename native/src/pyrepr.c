@@ -7,27 +7,16 @@
 
 #include "pyrepr.h"
 
-void py_float_repr(double x, char *buf, size_t size)
+#define N_DIGITS 24 /* a digit string and its terminating zero */
+
+/* The shortest correctly rounded digit string of x (finite, not zero) that reads back as x,
+ * trailing zeros dropped, into digits; returns their number, *decpt such that
+ * |x| = 0.d1d2... * 10**decpt. */
+static int shortest_digits(double x, char digits[N_DIGITS], int *decpt)
 {
-    char tmp[48], digits[24], out[48];
+    char tmp[48];
     const char *p;
-    int prec, nd = 0, exp10, decpt, neg, pos = 0;
-    if (size == 0) {
-        return;
-    }
-    if (isnan(x)) {
-        snprintf(buf, size, "nan");
-        return;
-    }
-    if (isinf(x)) {
-        snprintf(buf, size, "%s", x > 0.0 ? "inf" : "-inf");
-        return;
-    }
-    if (x == 0.0) {
-        snprintf(buf, size, "%s", signbit(x) ? "-0.0" : "0.0");
-        return;
-    }
-    /* the shortest correctly rounded digit string that reads back as x */
+    int prec, nd = 0, exp10;
     for (prec = 1; prec < 17; prec++) {
         snprintf(tmp, sizeof tmp, "%.*e", prec - 1, x);
         if (strtod(tmp, NULL) == x) {
@@ -36,12 +25,11 @@ void py_float_repr(double x, char *buf, size_t size)
     }
     snprintf(tmp, sizeof tmp, "%.*e", prec - 1, x);
     p = tmp;
-    neg = (*p == '-');
-    if (neg) {
+    if (*p == '-') {
         p++;
     }
     for (; *p && *p != 'e' && *p != 'E'; p++) {
-        if (*p >= '0' && *p <= '9' && nd < (int)sizeof digits - 1) {
+        if (*p >= '0' && *p <= '9' && nd < N_DIGITS - 1) {
             digits[nd++] = *p;
         }
     }
@@ -50,10 +38,14 @@ void py_float_repr(double x, char *buf, size_t size)
         nd--;
     }
     digits[nd] = '\0';
-    decpt = exp10 + 1; /* x = 0.d1d2... * 10**decpt */
-    if (neg) {
-        out[pos++] = '-';
-    }
+    *decpt = exp10 + 1;
+    return nd;
+}
+
+/* The nd digits with the point at decpt written as repr() writes them, at out + pos; returns the
+ * position after them. */
+static int place_digits(const char *digits, int nd, int decpt, char *out, size_t size, int pos)
+{
     if (decpt <= -4 || decpt > 16) { /* float_repr_style 'r': exponent notation */
         out[pos++] = digits[0];
         if (nd > 1) {
@@ -61,7 +53,7 @@ void py_float_repr(double x, char *buf, size_t size)
             memcpy(out + pos, digits + 1, (size_t)(nd - 1));
             pos += nd - 1;
         }
-        pos += snprintf(out + pos, sizeof out - (size_t)pos, "e%+.2d", decpt - 1);
+        pos += snprintf(out + pos, size - (size_t)pos, "e%+.2d", decpt - 1);
     } else if (decpt <= 0) {
         out[pos++] = '0';
         out[pos++] = '.';
@@ -85,6 +77,33 @@ void py_float_repr(double x, char *buf, size_t size)
         memcpy(out + pos, digits + decpt, (size_t)(nd - decpt));
         pos += nd - decpt;
     }
+    return pos;
+}
+
+void py_float_repr(double x, char *buf, size_t size)
+{
+    char digits[N_DIGITS], out[48];
+    int nd, decpt, pos = 0;
+    if (size == 0) {
+        return;
+    }
+    if (isnan(x)) {
+        snprintf(buf, size, "nan");
+        return;
+    }
+    if (isinf(x)) {
+        snprintf(buf, size, "%s", x > 0.0 ? "inf" : "-inf");
+        return;
+    }
+    if (x == 0.0) {
+        snprintf(buf, size, "%s", signbit(x) ? "-0.0" : "0.0");
+        return;
+    }
+    nd = shortest_digits(x, digits, &decpt);
+    if (x < 0.0) {
+        out[pos++] = '-';
+    }
+    pos = place_digits(digits, nd, decpt, out, sizeof out, pos);
     out[pos] = '\0';
     snprintf(buf, size, "%s", out);
 }

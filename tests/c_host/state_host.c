@@ -23,25 +23,27 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
     printf("log %d %s\n", (int)status, message);
 }
 
-#define FN(type, name) type *name = (type *)sym(lib, #name)
+static const fmi2CallbackFunctions CALLBACKS = {logger, calloc, free, NULL, NULL};
 
-int main(int argc, char **argv)
+/* The FMI 2.0 functions the host calls, all looked up before the first call. */
+typedef struct {
+    fmi2InstantiateTYPE *fmi2Instantiate;
+    fmi2SetupExperimentTYPE *fmi2SetupExperiment;
+    fmi2EnterInitializationModeTYPE *fmi2EnterInitializationMode;
+    fmi2ExitInitializationModeTYPE *fmi2ExitInitializationMode;
+    fmi2SetRealTYPE *fmi2SetReal;
+    fmi2DoStepTYPE *fmi2DoStep;
+    fmi2GetFMUstateTYPE *fmi2GetFMUstate;
+    fmi2SetFMUstateTYPE *fmi2SetFMUstate;
+    fmi2SerializedFMUstateSizeTYPE *fmi2SerializedFMUstateSize;
+    fmi2SerializeFMUstateTYPE *fmi2SerializeFMUstate;
+    fmi2DeSerializeFMUstateTYPE *fmi2DeSerializeFMUstate;
+} Fmi;
+
+#define FN(type, name) f->name = (type *)sym(lib, #name)
+
+static void load(void *lib, Fmi *f)
 {
-    void *lib;
-    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    fmi2Component c;
-    fmi2FMUstate state = NULL;
-    size_t size = 0;
-    int steps;
-    if (argc < 7) {
-        fprintf(stderr, "usage: state_host LIB GUID STEPS INPUTS write OUT | read FILE...\n");
-        return 2;
-    }
-    lib = open_library(argv[1]);
-    if (!lib) {
-        fprintf(stderr, "cannot load %s\n", argv[1]);
-        return 1;
-    }
     FN(fmi2InstantiateTYPE, fmi2Instantiate);
     FN(fmi2SetupExperimentTYPE, fmi2SetupExperiment);
     FN(fmi2EnterInitializationModeTYPE, fmi2EnterInitializationMode);
@@ -53,40 +55,58 @@ int main(int argc, char **argv)
     FN(fmi2SerializedFMUstateSizeTYPE, fmi2SerializedFMUstateSize);
     FN(fmi2SerializeFMUstateTYPE, fmi2SerializeFMUstate);
     FN(fmi2DeSerializeFMUstateTYPE, fmi2DeSerializeFMUstate);
-    c = fmi2Instantiate("s", fmi2CoSimulation, argv[2], "", &cb, fmi2False, fmi2False);
-    if (!c || fmi2SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0) != fmi2OK) {
-        return 1;
+}
+
+/* The instance set up with INPUTS, initialized and STEPS steps on; NULL when a call failed. */
+static fmi2Component run(const Fmi *f, const char *guid, char *inputs, int steps)
+{
+    fmi2Component c = f->fmi2Instantiate("s", fmi2CoSimulation, guid, "", &CALLBACKS, fmi2False,
+                                         fmi2False);
+    if (!c || f->fmi2SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0) != fmi2OK) {
+        return NULL;
     }
-    for (char *p = strcmp(argv[4], "-") ? strtok(argv[4], ",") : NULL; p; p = strtok(NULL, ",")) {
+    for (char *p = strcmp(inputs, "-") ? strtok(inputs, ",") : NULL; p; p = strtok(NULL, ",")) {
         const fmi2ValueReference vr = (fmi2ValueReference)strtoul(p, &p, 10);
         const fmi2Real value = strtod(p + 1, NULL);
-        if (fmi2SetReal(c, &vr, 1, &value) != fmi2OK) {
-            return 1;
+        if (f->fmi2SetReal(c, &vr, 1, &value) != fmi2OK) {
+            return NULL;
         }
     }
-    if (fmi2EnterInitializationMode(c) != fmi2OK || fmi2ExitInitializationMode(c) != fmi2OK) {
+    if (f->fmi2EnterInitializationMode(c) != fmi2OK ||
+        f->fmi2ExitInitializationMode(c) != fmi2OK) {
+        return NULL;
+    }
+    for (int k = 0; k < steps; k++) {
+        if (f->fmi2DoStep(c, k / 400.0, 1 / 400.0, fmi2True) != fmi2OK) {
+            return NULL;
+        }
+    }
+    return c;
+}
+
+/* "write OUT": the serialized state into the file; 0, or 1 when anything failed. */
+static int write_state(const Fmi *f, fmi2Component c, const char *path)
+{
+    fmi2FMUstate state = NULL;
+    size_t size = 0;
+    FILE *out = fopen(path, "wb");
+    char *buf;
+    if (!out || f->fmi2GetFMUstate(c, &state) != fmi2OK ||
+        f->fmi2SerializedFMUstateSize(c, state, &size) != fmi2OK || !(buf = malloc(size)) ||
+        f->fmi2SerializeFMUstate(c, state, buf, size) != fmi2OK ||
+        fwrite(buf, 1, size, out) != size || fclose(out) != 0) {
         return 1;
     }
-    steps = atoi(argv[3]);
-    for (int k = 0; k < steps; k++) {
-        if (fmi2DoStep(c, k / 400.0, 1 / 400.0, fmi2True) != fmi2OK) {
-            return 1;
-        }
-    }
-    if (strcmp(argv[5], "write") == 0) {
-        FILE *out = fopen(argv[6], "wb");
-        char *buf;
-        if (!out || fmi2GetFMUstate(c, &state) != fmi2OK ||
-            fmi2SerializedFMUstateSize(c, state, &size) != fmi2OK || !(buf = malloc(size)) ||
-            fmi2SerializeFMUstate(c, state, buf, size) != fmi2OK ||
-            fwrite(buf, 1, size, out) != size || fclose(out) != 0) {
-            return 1;
-        }
-        printf("wrote %lu bytes\n", (unsigned long)size);
-        return 0;
-    }
-    for (int k = 6; k < argc; k++) {
-        FILE *in = fopen(argv[k], "rb");
+    printf("wrote %lu bytes\n", (unsigned long)size);
+    return 0;
+}
+
+/* "read FILE...": each file deserialized, a state accepted set and one more step taken; 1 when
+ * a file cannot be opened. */
+static int read_states(const Fmi *f, fmi2Component c, int steps, int n_files, char **files)
+{
+    for (int k = 0; k < n_files; k++) {
+        FILE *in = fopen(files[k], "rb");
         static char buf[1 << 16];
         fmi2FMUstate restored = NULL;
         fmi2Status status;
@@ -96,16 +116,43 @@ int main(int argc, char **argv)
         }
         n = fread(buf, 1, sizeof buf, in);
         fclose(in);
-        status = fmi2DeSerializeFMUstate(c, buf, n, &restored);
+        status = f->fmi2DeSerializeFMUstate(c, buf, n, &restored);
         if (status == fmi2OK) {
-            printf("%s %d step=%d\n", argv[k], (int)status,
-                   fmi2SetFMUstate(c, restored) == fmi2OK &&
-                           fmi2DoStep(c, steps / 400.0, 1 / 400.0, fmi2True) == fmi2OK
+            printf("%s %d step=%d\n", files[k], (int)status,
+                   f->fmi2SetFMUstate(c, restored) == fmi2OK &&
+                           f->fmi2DoStep(c, steps / 400.0, 1 / 400.0, fmi2True) == fmi2OK
                        ? 0
                        : 1);
         } else {
-            printf("%s %d\n", argv[k], (int)status);
+            printf("%s %d\n", files[k], (int)status);
         }
     }
     return 0;
+}
+
+int main(int argc, char **argv)
+{
+    void *lib;
+    Fmi f;
+    fmi2Component c;
+    int steps;
+    if (argc < 7) {
+        fprintf(stderr, "usage: state_host LIB GUID STEPS INPUTS write OUT | read FILE...\n");
+        return 2;
+    }
+    lib = open_library(argv[1]);
+    if (!lib) {
+        fprintf(stderr, "cannot load %s\n", argv[1]);
+        return 1;
+    }
+    load(lib, &f);
+    steps = atoi(argv[3]);
+    c = run(&f, argv[2], argv[4], steps);
+    if (!c) {
+        return 1;
+    }
+    if (strcmp(argv[5], "write") == 0) {
+        return write_state(&f, c, argv[6]);
+    }
+    return read_states(&f, c, steps, argc - 6, argv + 6);
 }

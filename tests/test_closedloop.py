@@ -217,6 +217,17 @@ def test_fmpy_simulate_with_only_the_default_experiment(closed_loops, fmi, tmp_p
     assert rows["plantcontact_force"].max() > 50.0  # the impact peak (88 N at 400 Hz)
 
 
+def test_the_parts_compose_through_one_table_and_rename_nothing():
+    """native/closedloop: the two models are compiled unchanged, their model API static in each
+    part's translation unit (MODEL_LINKAGE), and used through one Part table each; no macro
+    renames a model's function or table."""
+    folder = Path(__file__).resolve().parents[1] / "native" / "closedloop"
+    for path in sorted(folder.glob("*.[ch]")):
+        text = path.read_text()
+        assert not re.search(r"#define\s+(model_\w+|N?_?MODEL_STATE_REALS)\b", text), path.name
+    assert "const Part PART_TABLE" in (folder / "part_api.h").read_text()
+
+
 def test_model_exchange_is_not_offered(closed_loops):
     """Co-simulation only: no ModelExchange element, and an ME instantiation is refused."""
     from fmpy import extract

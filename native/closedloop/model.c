@@ -22,6 +22,11 @@
 
 #define TIME_TOL 1e-9 /* sample-time comparisons, relative to the sample period (as the controller) */
 
+static const Part *part_api(int part)
+{
+    return part == PART_PLANT ? &plant_part : &controller_part;
+}
+
 static PartData *part_of(ModelState *m, int part)
 {
     return part == PART_PLANT ? &m->plant : &m->controller;
@@ -32,20 +37,18 @@ static void copy_parameters(const Data *d, ModelState *m, int tunable_only)
 {
     for (int vr = 0; vr < N_VARS; vr++) {
         const VarInfo *v = &VARS[vr];
+        const Part *part = part_api(LINKS[vr].part);
         PartData *p = part_of(m, LINKS[vr].part);
         const int pvr = LINKS[vr].vr;
         if (v->causality != C_PARAMETER || (tunable_only && !v->tunable)) {
             continue;
         }
         if (v->type == T_REAL) {
-            (LINKS[vr].part == PART_PLANT ? plant_part_set_real : controller_part_set_real)(
-                p, pvr, d->r[vr]);
+            part->set_real(p, pvr, d->r[vr]);
         } else if (v->type == T_STRING) {
-            (LINKS[vr].part == PART_PLANT ? plant_part_set_string : controller_part_set_string)(
-                p, pvr, d->s[vr]);
+            part->set_string(p, pvr, d->s[vr]);
         } else {
-            (LINKS[vr].part == PART_PLANT ? plant_part_set_int : controller_part_set_int)(
-                p, pvr, d->i[vr]);
+            part->set_int(p, pvr, d->i[vr]);
         }
     }
 }
@@ -54,9 +57,8 @@ static void copy_outputs(Data *d)
 {
     for (int vr = 0; vr < N_VARS; vr++) {
         if (VARS[vr].causality == C_OUTPUT) {
-            d->r[vr] = LINKS[vr].part == PART_PLANT
-                           ? plant_part_get_real(&d->m.plant, LINKS[vr].vr)
-                           : controller_part_get_real(&d->m.controller, LINKS[vr].vr);
+            d->r[vr] = part_api(LINKS[vr].part)->get_real(part_of(&d->m, LINKS[vr].part),
+                                                          LINKS[vr].vr);
         }
     }
 }
@@ -65,16 +67,16 @@ static void copy_outputs(Data *d)
 static void feed_controller(ModelState *m)
 {
     for (int k = 0; k < N_FEED; k++) {
-        controller_part_set_real(&m->controller, FEED[k][1],
-                                 plant_part_get_real(&m->plant, FEED[k][0]));
+        controller_part.set_real(&m->controller, FEED[k][1],
+                                 plant_part.get_real(&m->plant, FEED[k][0]));
     }
 }
 
 static void feed_plant(ModelState *m)
 {
     for (int k = 0; k < N_TORQUE; k++) {
-        plant_part_set_real(&m->plant, TORQUE[k][1],
-                            controller_part_get_real(&m->controller, TORQUE[k][0]));
+        plant_part.set_real(&m->plant, TORQUE[k][1],
+                            controller_part.get_real(&m->controller, TORQUE[k][0]));
     }
 }
 
@@ -88,16 +90,16 @@ int model_initialize(Data *d, char *msg)
 {
     char inner[MSG_MAX];
     ModelState *m = &d->m;
-    plant_part_start(&m->plant, d->start_time);
-    controller_part_start(&m->controller, d->start_time);
+    plant_part.start(&m->plant, d->start_time);
+    controller_part.start(&m->controller, d->start_time);
     copy_parameters(d, m, 0);
     inner[0] = '\0';
-    if (plant_part_initialize(&m->plant, inner)) {
+    if (plant_part.initialize(&m->plant, inner)) {
         return part_failed(msg, "plant", inner);
     }
     feed_controller(m);
     inner[0] = '\0';
-    if (controller_part_initialize(&m->controller, inner)) {
+    if (controller_part.initialize(&m->controller, inner)) {
         return part_failed(msg, "controller", inner);
     }
     if (inner[0] != '\0') { /* a warning (e.g. a singular start): the glue logs it */
@@ -105,7 +107,7 @@ int model_initialize(Data *d, char *msg)
     }
     feed_plant(m);
     inner[0] = '\0';
-    if (plant_part_initialize(&m->plant, inner)) {
+    if (plant_part.initialize(&m->plant, inner)) {
         return part_failed(msg, "plant", inner);
     }
     copy_outputs(d);
@@ -117,11 +119,11 @@ static int loop_step(ModelState *m, double t, double h, char *msg)
 {
     char inner[MSG_MAX];
     feed_controller(m);
-    if (controller_part_step(&m->controller, t, h, inner)) {
+    if (controller_part.step(&m->controller, t, h, inner)) {
         return part_failed(msg, "controller", inner);
     }
     feed_plant(m);
-    if (plant_part_step(&m->plant, t, h, inner)) {
+    if (plant_part.step(&m->plant, t, h, inner)) {
         return part_failed(msg, "plant", inner);
     }
     return 0;
@@ -176,11 +178,11 @@ int model_check_tunable(const Data *d, char *msg)
     }
     *tmp = d->m;
     copy_parameters(d, tmp, 1);
-    if (plant_part_check_tunable(&tmp->plant, inner)) {
+    if (plant_part.check_tunable(&tmp->plant, inner)) {
         free(tmp);
         return part_failed(msg, "plant", inner);
     }
-    if (controller_part_check_tunable(&tmp->controller, inner)) {
+    if (controller_part.check_tunable(&tmp->controller, inner)) {
         free(tmp);
         return part_failed(msg, "controller", inner);
     }
@@ -191,10 +193,10 @@ int model_check_tunable(const Data *d, char *msg)
 int model_check_state(const Data *d, char *msg)
 {
     char inner[MSG_MAX];
-    if (plant_part_check_state(&d->m.plant, inner)) {
+    if (plant_part.check_state(&d->m.plant, inner)) {
         return part_failed(msg, "plant", inner);
     }
-    if (controller_part_check_state(&d->m.controller, inner)) {
+    if (controller_part.check_state(&d->m.controller, inner)) {
         return part_failed(msg, "controller", inner);
     }
     return 0;

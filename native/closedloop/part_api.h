@@ -1,24 +1,14 @@
-/* The body of a part's translation unit (plant_part.c, controller_part.c): defines PART_PREFIX
- * and the part's headers, then includes this file. It renames the part's model functions (so the
- * two parts and the closed loop link into one library), compiles the part's model.c unchanged
- * and implements the parts.h functions on the part's own Data. */
+/* The body of a part's translation unit (plant_part.c, controller_part.c): defines PART_TABLE
+ * (the part's name in parts.h) and the part's headers, then includes this file. It compiles the
+ * part's model.c unchanged with its model API static (MODEL_LINKAGE), so the two parts and the
+ * closed loop link into one library, and gives the closed loop the part's Part table: the same
+ * functions for both parts, on each part's own Data. */
 #include <math.h>
 #include <string.h>
 
 #include "parts.h"
 
-#define PART_CAT2(a, b) a##_##b
-#define PART_CAT(a, b) PART_CAT2(a, b)
-#define PART(name) PART_CAT(PART_PREFIX, name)
-
-#define model_initialize PART(model_initialize)
-#define model_step PART(model_step)
-#define model_step_early PART(model_step_early)
-#define model_check_tunable PART(model_check_tunable)
-#define model_check_state PART(model_check_state)
-#define MODEL_STATE_REALS PART(MODEL_STATE_REALS)
-#define N_MODEL_STATE_REALS PART(N_MODEL_STATE_REALS)
-
+#define MODEL_LINKAGE static
 #include PART_MODEL_SOURCE /* the part's model.c, as shipped in its own FMU */
 
 typedef char part_data_fits[sizeof(Data) <= sizeof(PartData) ? 1 : -1];
@@ -27,37 +17,37 @@ typedef char part_data_fits[sizeof(Data) <= sizeof(PartData) ? 1 : -1];
 #define AS_CDATA(d) ((const Data *)(const void *)(d)->bytes)
 
 /* The part's start values, as its own FMU's fmi2Instantiate sets them. */
-void PART(part_start)(PartData *p, double start_time)
+static void part_start(PartData *p, double start_time)
 {
     memset(p, 0, sizeof *p);
     data_start(AS_DATA(p), start_time);
 }
 
-void PART(part_set_real)(PartData *p, int vr, double value) { AS_DATA(p)->r[vr] = value; }
-void PART(part_set_int)(PartData *p, int vr, int value) { AS_DATA(p)->i[vr] = value; }
-double PART(part_get_real)(const PartData *p, int vr) { return AS_CDATA(p)->r[vr]; }
+static void part_set_real(PartData *p, int vr, double value) { AS_DATA(p)->r[vr] = value; }
+static void part_set_int(PartData *p, int vr, int value) { AS_DATA(p)->i[vr] = value; }
+static double part_get_real(const PartData *p, int vr) { return AS_CDATA(p)->r[vr]; }
 
-void PART(part_set_string)(PartData *p, int vr, const char *value)
+static void part_set_string(PartData *p, int vr, const char *value)
 {
     memset(AS_DATA(p)->s[vr], 0, STRING_MAX);
     strncpy(AS_DATA(p)->s[vr], value, STRING_MAX - 1);
 }
 
-int PART(part_initialize)(PartData *p, char *msg) { return model_initialize(AS_DATA(p), msg); }
+static int part_initialize(PartData *p, char *msg) { return model_initialize(AS_DATA(p), msg); }
 
-int PART(part_step)(PartData *p, double t, double h, char *msg)
+static int part_step(PartData *p, double t, double h, char *msg)
 {
     return model_step(AS_DATA(p), t, h, msg);
 }
 
-int PART(part_check_tunable)(const PartData *p, char *msg)
+static int part_check_tunable(const PartData *p, char *msg)
 {
     return model_check_tunable(AS_CDATA(p), msg);
 }
 
 /* A part's state from outside (a deserialized closed-loop state): its reals finite, then its
  * model's own checks, as the part's glue does for its own FMU's states. */
-int PART(part_check_state)(const PartData *p, char *msg)
+static int part_check_state(const PartData *p, char *msg)
 {
     const Data *d = AS_CDATA(p);
     if (!isfinite(d->start_time)) {
@@ -83,3 +73,7 @@ int PART(part_check_state)(const PartData *p, char *msg)
     }
     return model_check_state(d, msg);
 }
+
+const Part PART_TABLE = {part_start,      part_set_real, part_set_int,       part_set_string,
+                         part_get_real,   part_initialize, part_step, part_check_tunable,
+                         part_check_state};

@@ -15,18 +15,20 @@ typedef union {
     int64_t align_int;
 } PartData;
 
-#define DECLARE_PART(p)                                                                            \
-    void p##_part_start(PartData *d, double start_time);                                           \
-    void p##_part_set_real(PartData *d, int vr, double value);                                     \
-    void p##_part_set_int(PartData *d, int vr, int value);                                         \
-    void p##_part_set_string(PartData *d, int vr, const char *value);                              \
-    double p##_part_get_real(const PartData *d, int vr);                                           \
-    int p##_part_initialize(PartData *d, char *msg);                                               \
-    int p##_part_step(PartData *d, double t, double h, char *msg);                                 \
-    int p##_part_check_tunable(const PartData *d, char *msg);                                      \
-    int p##_part_check_state(const PartData *d, char *msg);
+/* What the closed loop does with a part: the same functions for both, each on its own Data. */
+typedef struct {
+    void (*start)(PartData *d, double start_time);
+    void (*set_real)(PartData *d, int vr, double value);
+    void (*set_int)(PartData *d, int vr, int value);
+    void (*set_string)(PartData *d, int vr, const char *value);
+    double (*get_real)(const PartData *d, int vr);
+    int (*initialize)(PartData *d, char *msg);
+    int (*step)(PartData *d, double t, double h, char *msg);
+    int (*check_tunable)(const PartData *d, char *msg);
+    int (*check_state)(const PartData *d, char *msg);
+} Part;
 
-DECLARE_PART(plant)
-DECLARE_PART(controller)
+extern const Part plant_part;      /* plant_part.c */
+extern const Part controller_part; /* controller_part.c */
 
 #endif

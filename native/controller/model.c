@@ -470,7 +470,7 @@ int model_check_state(const Data *d, char *msg)
 
 /* Every double of ModelState (glue.h). In memory, yhat and tau_prev may overflow to inf or NaN
  * under extreme gains (as in the Python model); a serialized state must hold finite ones. */
-const StateReals MODEL_STATE_REALS[] = {
+MODEL_LINKAGE const StateReals MODEL_STATE_REALS[] = {
     {"controller t", offsetof(ModelState, t), 1},
     {"controller start_time", offsetof(ModelState, start_time), 1},
     {"controller yhat", offsetof(ModelState, yhat), 3},
@@ -478,4 +478,4 @@ const StateReals MODEL_STATE_REALS[] = {
     {"controller tau_prev", offsetof(ModelState, tau_prev), 3},
     {"controller f_prev", offsetof(ModelState, f_prev), 3},
 };
-const int N_MODEL_STATE_REALS = (int)(sizeof MODEL_STATE_REALS / sizeof MODEL_STATE_REALS[0]);
+MODEL_LINKAGE const int N_MODEL_STATE_REALS = sizeof MODEL_STATE_REALS / sizeof *MODEL_STATE_REALS;

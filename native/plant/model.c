@@ -489,7 +489,7 @@ int model_check_state(const Data *d, char *msg)
 }
 
 /* Every double of ModelState (glue.h), the generator's cached deviate included (0.0 when none). */
-const StateReals MODEL_STATE_REALS[] = {
+MODEL_LINKAGE const StateReals MODEL_STATE_REALS[] = {
     {"plant t", offsetof(ModelState, t), 1},
     {"plant q", offsetof(ModelState, q), 3},
     {"plant qd", offsetof(ModelState, qd), 3},
@@ -497,4 +497,4 @@ const StateReals MODEL_STATE_REALS[] = {
     {"plant q_meas", offsetof(ModelState, q_meas), 3},
     {"plant noise generator's gauss_next", offsetof(ModelState, rng.gauss_next), 1},
 };
-const int N_MODEL_STATE_REALS = (int)(sizeof MODEL_STATE_REALS / sizeof MODEL_STATE_REALS[0]);
+MODEL_LINKAGE const int N_MODEL_STATE_REALS = sizeof MODEL_STATE_REALS / sizeof *MODEL_STATE_REALS;

@@ -79,15 +79,24 @@ static inline void data_start(Data *d, double start_time)
     d->start_time = start_time;
 }
 
-int model_initialize(Data *d, char *msg);
-int model_step(Data *d, double t, double h, char *msg);
+/* How the model API links: externally in the model's own FMU; internally where the closed loop
+ * compiles the model as one of its two parts (part_api.h defines MODEL_LINKAGE as static first:
+ * a function declared static here and defined without a storage class in model.c is static), so
+ * the two models' model_* functions and tables never meet in the closed loop's library. */
+#ifndef MODEL_LINKAGE
+#define MODEL_LINKAGE
+#define MODEL_TABLES_EXTERN
+#endif
+
+MODEL_LINKAGE int model_initialize(Data *d, char *msg);
+MODEL_LINKAGE int model_step(Data *d, double t, double h, char *msg);
 /* Check new values of tunable parameters (set into d after initialization); 0 if usable, else
  * 1 with msg set. The model reads them from its next step on. */
-int model_check_tunable(const Data *d, char *msg);
+MODEL_LINKAGE int model_check_tunable(const Data *d, char *msg);
 /* A ModelState from outside (a deserialized FMU state), checked before the model may use it:
  * every counter, index and enumeration in range, and the reals the model needs finite (the glue
  * has checked the parameters and inputs in d). 0 if usable, else 1 with the reason in msg. */
-int model_check_state(const Data *d, char *msg);
+MODEL_LINKAGE int model_check_state(const Data *d, char *msg);
 
 /* The reals of the model's ModelState (name, byte offset, count), for the check that a
  * serialized state holds only finite numbers: every double in ModelState is listed. */
@@ -96,8 +105,10 @@ typedef struct {
     size_t offset;
     int count;
 } StateReals;
+#ifdef MODEL_TABLES_EXTERN /* (a part's are static, defined in its model.c with MODEL_LINKAGE) */
 extern const StateReals MODEL_STATE_REALS[];
 extern const int N_MODEL_STATE_REALS;
+#endif
 
 /* The work of one FMI 3.0 fmi3DoStep so far, across the model steps it restarts at the switches
  * (model_step_early): zeroed at the start of each fmi3DoStep, so the model's per-step bounds
